@@ -1,0 +1,52 @@
+"""Prime generation and modular helpers on gmpy2, with randomness from :mod:`secrets` only."""
+
+from __future__ import annotations
+
+import secrets
+
+import gmpy2
+from gmpy2 import mpz
+
+MILLER_RABIN_ROUNDS = 40
+
+
+def random_below(bound: int) -> mpz:
+    """Uniform integer in [0, bound)."""
+    return mpz(secrets.randbelow(int(bound)))
+
+
+def random_unit(modulus: int) -> mpz:
+    """Uniform element of Z_modulus^* (rejection sampling; for RSA moduli one try suffices)."""
+    while True:
+        r = mpz(secrets.randbelow(int(modulus)))
+        if r > 0 and gmpy2.gcd(r, modulus) == 1:
+            return r
+
+
+def random_nonzero_below(bound: int) -> mpz:
+    """Uniform integer in [1, bound)."""
+    return mpz(1 + secrets.randbelow(int(bound) - 1))
+
+
+def is_probable_prime(n: int) -> bool:
+    return bool(gmpy2.is_prime(mpz(n), MILLER_RABIN_ROUNDS))
+
+
+def random_prime(bits: int) -> mpz:
+    """Uniform-start random prime of exactly ``bits`` bits, top two bits set.
+
+    Setting the two top bits makes the product of two such primes exactly ``2 * bits`` long.
+    """
+    if bits < 16:
+        raise ValueError("prime too small")
+    while True:
+        candidate = mpz(secrets.randbits(bits)) | (mpz(3) << (bits - 2)) | 1
+        p = gmpy2.next_prime(candidate)
+        if p.bit_length() == bits and is_probable_prime(p):
+            return p
+
+
+def crt_pair(rp: int, rq: int, p: int, q: int, q_inv_p: int) -> mpz:
+    """The x mod p*q with x = rp (mod p), x = rq (mod q), given q^-1 mod p (Garner)."""
+    h = ((mpz(rp) - rq) * q_inv_p) % p
+    return mpz(rq) + h * q
