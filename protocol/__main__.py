@@ -1,10 +1,11 @@
-"""Command line: ``python -m protocol {demo, bench crypto}``."""
+"""Command line: ``python -m protocol {demo, compare, bench crypto|paper|scaling}``."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+from pathlib import Path
 
 from .errors import ProtocolError
 
@@ -15,23 +16,59 @@ def _demo(_args: argparse.Namespace) -> int:
     return run_demo()
 
 
-def _bench(args: argparse.Namespace) -> int:
-    from .bench import bench_crypto, format_crypto
+def _compare(args: argparse.Namespace) -> int:
+    from .compare import compare, format_compare
 
-    result = bench_crypto(repeat=args.repeat, progress=not args.quiet)
-    print(json.dumps(result, indent=2) if args.json else format_crypto(result))
+    result = compare(args.alice, args.bob, args.suite, range_=args.range, progress=not args.json)
+    print(json.dumps(result, indent=2) if args.json else format_compare(result))
+    return 0 if all(c["hits"] == c["plain_hits"] for c in result["cases"]) else 1
+
+
+def _bench(args: argparse.Namespace) -> int:
+    result: dict[str, object]
+    if args.what == "crypto":
+        from .bench import bench_crypto, format_crypto
+
+        result = bench_crypto(repeat=args.repeat, progress=not args.quiet)
+        text = format_crypto(result)
+    elif args.what == "paper":
+        from .bench_paths import DEFAULT_DATA, bench_paper, format_paper
+
+        data = Path(args.data) if args.data else DEFAULT_DATA
+        result = bench_paper(data, args.suite, progress=not args.quiet)
+        text = format_paper(result)
+    else:
+        from .bench_paths import bench_scaling, format_scaling
+
+        sizes = tuple(int(s) for s in args.sizes.split(","))
+        result = bench_scaling(sizes, args.suite, args.range or 99, progress=not args.quiet)
+        text = format_scaling(result)
+    print(json.dumps(result, indent=2) if args.json else text)
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m protocol", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="demonstrate the cryptographic core on both back-ends")
+    demo = sub.add_parser("demo", help="two-drone demonstration")
     demo.set_defaults(func=_demo)
+
+    compare = sub.add_parser("compare", help="run the encrypted path comparison on two files")
+    compare.add_argument("alice", help="Alice's paths: paper format (x,y)(x,y)... or .plan")
+    compare.add_argument("bob", help="Bob's paths, same format as Alice's")
+    compare.add_argument("--suite", choices=["compact", "paper"], default="compact")
+    compare.add_argument("--range", type=int, default=None, help="public grid range R")
+    compare.add_argument("--json", action="store_true", help="machine-readable output")
+    compare.set_defaults(func=_compare)
+
     bench = sub.add_parser("bench", help="benchmarks that print tables")
-    bench.add_argument("suite", choices=["crypto"], help="what to measure")
+    bench.add_argument("what", choices=["crypto", "paper", "scaling"], help="what to measure")
+    bench.add_argument("--suite", choices=["compact", "paper"], default="compact")
+    bench.add_argument("--data", help="directory with the paper's data (paper)")
+    bench.add_argument("--sizes", default="1,2,4,8,16,32", help="n = m values (scaling)")
+    bench.add_argument("--range", type=int, default=None, help="coordinate range (scaling)")
     bench.add_argument("--json", action="store_true", help="machine-readable output")
-    bench.add_argument("--repeat", type=int, default=15, help="runs per median (default 15)")
+    bench.add_argument("--repeat", type=int, default=15, help="runs per median (crypto)")
     bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     bench.set_defaults(func=_bench)
     args = parser.parse_args(argv)

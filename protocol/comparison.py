@@ -203,19 +203,28 @@ class ComparisonAlice(Generic[C]):
         return BlindedTests(tuple(out))
 
     def _blinded_cs(self, d: Sequence[C], r: int, delta: int) -> list[C]:
-        """Veugen's c_i and the equality term for one comparison (same work for any input)."""
-        s = 1 - 2 * delta
-        three_w = self.bits.constant(0)  # 3 * sum_{k > i} w_k
-        cs: list[C] = []
-        for i in reversed(range(self.l)):
-            r_i = (r >> i) & 1
-            cs.append(d[i] + (s - r_i) + three_w)
-            w_i = (d[i], 1 - d[i])[r_i]  # d_i XOR r_i, both branches computed
-            three_w = three_w + w_i + w_i + w_i
-        cs.append(three_w + 3 * (1 - delta))
-        blinded = [self.bits.blind(c) for c in cs]
-        _system_random.shuffle(blinded)
-        return blinded
+        return veugen_tests(self.bits, d, r, delta, self.l)
+
+
+def veugen_tests(bits: ZeroTestPublicKey[C], d: Sequence[C], r: int, delta: int, l: int) -> list[C]:
+    """Veugen's c_i and the equality term for one comparison, blinded and shuffled.
+
+    ``d`` are Bob's encrypted bits of d mod 2^l, ``r`` Alice's mask (only its l low bits
+    matter).  Exactly one result encrypts zero iff delta XOR [d mod 2^l < r mod 2^l] = 1.
+    The same operations run for any r and delta.
+    """
+    s = 1 - 2 * delta
+    three_w = bits.constant(0)  # 3 * sum_{k > i} w_k
+    cs: list[C] = []
+    for i in reversed(range(l)):
+        r_i = (r >> i) & 1
+        cs.append(d[i] + (s - r_i) + three_w)
+        w_i = (d[i], 1 - d[i])[r_i]  # d_i XOR r_i, both branches computed
+        three_w = three_w + w_i + w_i + w_i
+    cs.append(three_w + 3 * (1 - delta))
+    blinded = [bits.blind(c) for c in cs]
+    _system_random.shuffle(blinded)
+    return blinded
 
 
 # --------------------------------------------------------------------------- Bob

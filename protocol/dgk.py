@@ -82,6 +82,14 @@ class DGKPublicKey:
         value = (gmpy2.powmod(c.value, rho, self.n) * self.noise_pool.take()) % self.n
         return DGKCiphertext(self, value, fresh=True)
 
+    @property
+    def token_size(self) -> int:
+        return self.width
+
+    def token(self, c: DGKCiphertext) -> bytes:
+        """A DGK zero-test token is the ciphertext itself."""
+        return c.to_bytes()
+
     def batch_size(self, count: int) -> int:
         return self.width * count
 
@@ -252,6 +260,9 @@ class DGKPrivateKey:
     def is_zero(self, c: DGKCiphertext) -> bool:
         """m == 0 (mod u)  iff  c^(v_p) == 1 (mod p)."""
         return bool(gmpy2.powmod(c.value, self.vp, self.p) == 1)
+
+    def token_is_zero(self, data: bytes) -> bool:
+        return self.is_zero(self.public_key.ciphertext_from_bytes(data))
 
     def decrypt(self, c: DGKCiphertext) -> int:
         """m in [0, u) through a table of (g^(v_p))^m mod p."""

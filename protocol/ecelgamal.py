@@ -17,6 +17,8 @@ A lone ciphertext is two compressed points, 66 bytes; the point at infinity is n
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import secrets
 from collections.abc import Sequence
 
@@ -24,11 +26,19 @@ from coincurve import PublicKey
 
 from . import secp256k1 as ec
 from .encoding import Reader
-from .errors import LocalProtocolError
+from .errors import LocalProtocolError, RemoteProtocolError
 
 CIPHERTEXT_SIZE = 2 * ec.POINT_SIZE
 NONCE_SIZE = 16
+TAG_SIZE = 8
+TOKEN_SIZE = 32 + TAG_SIZE
 _DOMAIN = b"pdc/ec-elgamal/C1/v1"
+_TAG_DOMAIN = b"pdc/ec-elgamal/token/v1"
+
+
+def _tag(c2: ec.Point) -> bytes:
+    """First 8 bytes of SHA-256 over the x coordinate of C2 (x of -P equals x of P)."""
+    return hashlib.sha256(_TAG_DOMAIN + ec.encode(c2)[1:]).digest()[:TAG_SIZE]
 
 
 def _random_scalar() -> int:
@@ -41,6 +51,7 @@ class ECPublicKey:
     __slots__ = ("h",)
     name = "ec-elgamal-secp256k1"
     ciphertext_size = CIPHERTEXT_SIZE
+    token_size = TOKEN_SIZE
     plaintext_modulus = ec.ORDER
 
     def __init__(self, h: PublicKey) -> None:
@@ -70,6 +81,17 @@ class ECPublicKey:
             ec.add(ec.mul(c.c2, rho), ec.mul(self.h, k)),
             fresh=True,
         )
+
+    def token(self, c: ECCiphertext) -> bytes:
+        """40-byte zero-test token of a blinded ciphertext: x(C1) and a tag of x(C2).
+
+        The key holder lifts x(C1) to either of its two points P = +-C1 and accepts iff the tag
+        of x P matches: x(x C1) = x(-x C1), and C2 = +-x C1 for a non-zero plaintext happens
+        with negligible probability.  A wrong tag match has probability 2^-64.
+        """
+        if not c.fresh:
+            raise LocalProtocolError("refusing to tokenise an EC ciphertext that is not fresh")
+        return ec.encode(c.c1)[1:] + _tag(c.c2)
 
     def batch_size(self, count: int) -> int:
         return NONCE_SIZE + ec.POINT_SIZE * count
@@ -140,6 +162,13 @@ class ECPrivateKey:
     def is_zero(self, c: ECCiphertext) -> bool:
         """m == 0  iff  C2 == x C1."""
         return _point_bytes(c.c2) == _point_bytes(ec.mul(c.c1, self.x))
+
+    def token_is_zero(self, data: bytes) -> bool:
+        """Zero test on a token made by :meth:`ECPublicKey.token` (invalid x is refused)."""
+        if len(data) != TOKEN_SIZE:
+            raise RemoteProtocolError("EC token has the wrong size")
+        c1 = ec.decode(b"\x02" + bytes(data[:32]))
+        return hmac.compare_digest(_tag(ec.mul(c1, self.x)), bytes(data[32:]))
 
     def decrypt_small(self, c: ECCiphertext, bound: int) -> int:
         """m for |m| < bound by exhaustive search (tests and diagnostics only)."""

@@ -26,3 +26,7 @@ class LocalProtocolError(ProtocolError):
 
 class InsecureParametersError(LocalProtocolError):
     """Parameters below 112-bit security were requested without the test-only opt-in."""
+
+
+class InputRangeError(LocalProtocolError):
+    """A local input (coordinate, path length, grid parameter) is outside what is supported."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import TypeVar
 
 from .comparison import (
@@ -21,7 +22,9 @@ from .comparison import (
 )
 from .encoding import Reader
 from .gadgets import GateAlice, GateBob, GateInputs, GateOutputs
+from .intersection import Alice, Bob
 from .paillier import PaillierPublicKey
+from .wire import MsgType
 from .zerotest import C
 
 T = TypeVar("T")
@@ -116,3 +119,20 @@ def run_gates(
     )
     assert alice.outputs is not None
     return list(alice.outputs), bob_shares, t
+
+
+def run_paths(alice: Alice, bob: Bob, transcript: Transcript | None = None) -> Transcript:
+    """Both parties of the path protocol, frame by frame, until Alice has her answer."""
+    t = transcript if transcript is not None else Transcript()
+    names = iter(MsgType)
+    frame: bytes | None = t.send(next(names).name, t.alice(alice.start), from_alice=True)
+    from_alice = True
+    while frame is not None:
+        receiver = bob if from_alice else alice
+        account = t.bob if from_alice else t.alice
+        current = frame
+        frame = account(partial(receiver.receive, current))
+        from_alice = not from_alice
+        if frame is not None:
+            t.send(next(names).name, frame, from_alice=from_alice)
+    return t

@@ -1,0 +1,218 @@
+"""Benchmarks of the path protocol: ``bench paper`` and ``bench scaling``.
+
+Each run goes through :func:`protocol.loopback.run_paths`: bytes are the serialised frames
+(public keys included, they travel in messages 1 and 2), CPU is ``time.process_time`` of each
+party's steps.  Key generation happens once per drone and is reported on its own line.
+"""
+
+from __future__ import annotations
+
+import csv
+import secrets
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+from .compare import Case, Party, load_cases, params_of, run_case
+from .formats import InputFormatError
+from .geometry import Point
+from .grid import GridKind, GridSpec
+from .wire import Suite
+
+DEFAULT_DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "anchor-data"
+
+# The paper's published figures and its code as measured here (../shared/notes/field-notes.md).
+PAPER_PUBLISHED = {"time_s": 4.407, "bytes": 4634, "note": "bytes are JVM object sizes"}
+PAPER_CODE_MEASURED = {
+    "time_s": 4.1,
+    "cpu_s": 1.6,
+    "bytes": 86_800,
+    "key_bytes": 20_200_000,
+    "security_bits": 80,
+}
+
+
+def _say(progress: bool, message: str) -> None:
+    if progress:
+        print(f"  ... {message}", file=sys.stderr, flush=True)
+
+
+def _summary(results: list[dict[str, Any]], pairs: list[int]) -> dict[str, Any]:
+    per_pair = [
+        (
+            r["cpu_s_alice"] / p,
+            r["cpu_s_bob"] / p,
+            r["bytes_alice_to_bob"] / p,
+            r["bytes_bob_to_alice"] / p,
+        )
+        for r, p in zip(results, pairs, strict=True)
+    ]
+    a, b, ab, ba = (statistics.median(col) for col in zip(*per_pair, strict=True))
+    return {
+        "runs": len(results),
+        "correct": sum(r["hits"] == r["plain_hits"] for r in results),
+        "median_cpu_s_alice": a,
+        "median_cpu_s_bob": b,
+        "median_cpu_s_total": statistics.median(x + y for x, y, _, _ in per_pair),
+        "median_bytes_alice_to_bob": ab,
+        "median_bytes_bob_to_alice": ba,
+        "median_bytes_total": statistics.median(x + y for _, _, x, y in per_pair),
+        "round_trips": max(r["round_trips"] for r in results),
+    }
+
+
+def bench_paper(
+    data: Path = DEFAULT_DATA, suite: str = "compact", progress: bool = True
+) -> dict[str, Any]:
+    """The paper's 30 single-segment pairs and its 5 route tests."""
+    if not (data / "alices_segments.txt").exists():
+        raise InputFormatError(f"no benchmark data in {data} (use --data DIR)")
+    _say(progress, f"generating keys ({suite})")
+    party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
+    cases = load_cases(data / "alices_segments.txt", data / "bobs_segments.txt")
+    pair_results = []
+    for number, case in enumerate(cases, start=1):
+        _say(progress, f"pair {number}/{len(cases)}")
+        pair_results.append(run_case(case, party))
+    expected_any: dict[int, bool] = {}
+    csv_path = data / "testroutine.csv"
+    if csv_path.exists():
+        with csv_path.open() as handle:
+            for row in csv.reader(handle):
+                if len(row) == 3 and row[0].strip():
+                    number = int("".join(ch for ch in row[0] if ch.isdigit()))
+                    expected_any[number] = row[2].strip().lower() == "true"
+    route_cases = []
+    for k in range(1, 6):
+        own, crypt = data / f"ownroute{k}.txt", data / f"cryptroute{k}.txt"
+        if own.exists() and crypt.exists():
+            route_cases.append((k, load_cases(own, crypt)[0]))
+    span = max(
+        (max(abs(c) for p in case.alice + case.bob for c in p) for _, case in route_cases),
+        default=1,
+    )
+    routes = []
+    for k, case in route_cases:
+        _say(progress, f"route {k}")
+        fixed = Case(case.alice, case.bob, GridSpec(GridKind.PLANE, span))
+        result = run_case(fixed, party)
+        result["route"] = k
+        result["segments"] = (len(case.alice) - 1, len(case.bob) - 1)
+        result["hit_indices"] = [i for i, h in enumerate(result["hits"]) if h]
+        result["expected_any"] = expected_any.get(k)
+        routes.append(result)
+    return {
+        "suite": suite,
+        "params": params_of(party, cases[0].grid),
+        "route_grid_range": span,
+        "route_comparison_bits": GridSpec(GridKind.PLANE, span).l,
+        "pairs": _summary(pair_results, [1] * len(pair_results)),
+        "routes": routes,
+        "paper_published": PAPER_PUBLISHED,
+        "paper_code_measured_here": PAPER_CODE_MEASURED,
+    }
+
+
+def format_paper(result: dict[str, Any]) -> str:
+    p, s = result["params"], result["pairs"]
+    lines = [
+        f"Paper benchmark, suite {result['suite']} ({p['bits_scheme']}), Paillier "
+        f"{p['paillier_bits']} bits, kappa {p['kappa']}, l = {p['comparison_bits']} bits "
+        f"(range +-{p['grid_range']}); key generation once: Alice "
+        f"{p['keygen_s']['alice'] * 1e3:.1f} ms, Bob {p['keygen_s']['bob'] * 1e3:.0f} ms.",
+        "",
+        "| 30 single-segment pairs | this project | paper's code, measured here "
+        "| paper, published |",
+        "|---|---:|---:|---:|",
+        f"| correct | {s['correct']}/{s['runs']} | 30/30 | - |",
+        f"| median CPU per pair, Alice | {s['median_cpu_s_alice'] * 1e3:.1f} ms | - | - |",
+        f"| median CPU per pair, Bob | {s['median_cpu_s_bob'] * 1e3:.1f} ms | - | - |",
+        f"| median CPU per pair, both | {s['median_cpu_s_total'] * 1e3:.1f} ms "
+        f"| {PAPER_CODE_MEASURED['cpu_s'] * 1e3:.0f} ms CPU, "
+        f"{PAPER_CODE_MEASURED['time_s']:.1f} s wall "
+        f"| {PAPER_PUBLISHED['time_s']:.3f} s |",
+        f"| median bytes per pair, A->B | {s['median_bytes_alice_to_bob']:.0f} | 40 400 | - |",
+        f"| median bytes per pair, B->A | {s['median_bytes_bob_to_alice']:.0f} | 46 400 | - |",
+        f"| median bytes per pair, total (keys included) | {s['median_bytes_total']:.0f} "
+        f"| 86 800 + 20.2 MB key | 4634 (object sizes) |",
+        f"| round trips | {s['round_trips']:.0f} | about 48 | - |",
+        "| security | 112-bit, nothing leaked | 80-bit DGK, leaks every bit | - |",
+        "",
+        f"Routes (grid range +-{result['route_grid_range']}, "
+        f"l = {result['route_comparison_bits']}):",
+        "",
+        "| route | m x n | hit segments | plaintext | expected any | bytes "
+        "| Alice CPU s | Bob CPU s |",
+        "|---:|---|---|---|---|---:|---:|---:|",
+    ]
+    for r in result["routes"]:
+        plain = [i for i, h in enumerate(r["plain_hits"]) if h]
+        lines.append(
+            f"| {r['route']} | {r['segments'][0]} x {r['segments'][1]} | {r['hit_indices']} "
+            f"| {plain} | {r['expected_any']} "
+            f"| {r['bytes_alice_to_bob'] + r['bytes_bob_to_alice']} "
+            f"| {r['cpu_s_alice']:.3f} | {r['cpu_s_bob']:.3f} |"
+        )
+    return "\n".join(lines)
+
+
+def random_path(segments: int, range_: int) -> tuple[Point, ...]:
+    return tuple(
+        (secrets.randbelow(2 * range_ + 1) - range_, secrets.randbelow(2 * range_ + 1) - range_)
+        for _ in range(segments + 1)
+    )
+
+
+def bench_scaling(
+    sizes: tuple[int, ...] = (1, 2, 4, 8, 16, 32),
+    suite: str = "compact",
+    range_: int = 99,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Random paths with n = m segments, coordinates in [-range, range]."""
+    _say(progress, f"generating keys ({suite})")
+    party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
+    grid = GridSpec(GridKind.PLANE, range_)
+    rows = []
+    for size in sizes:
+        _say(progress, f"{size} x {size}")
+        case = Case(random_path(size, range_), random_path(size, range_), grid)
+        r = run_case(case, party)
+        pairs = size * size
+        total = r["bytes_alice_to_bob"] + r["bytes_bob_to_alice"]
+        rows.append(
+            {
+                "segments": size,
+                "pairs": pairs,
+                "correct": r["hits"] == r["plain_hits"],
+                "bytes_total": total,
+                "bytes_per_pair": total / pairs,
+                "bytes_alice_to_bob": r["bytes_alice_to_bob"],
+                "bytes_bob_to_alice": r["bytes_bob_to_alice"],
+                "round_trips": r["round_trips"],
+                "cpu_s_alice": r["cpu_s_alice"],
+                "cpu_s_bob": r["cpu_s_bob"],
+            }
+        )
+    return {"suite": suite, "params": params_of(party, grid), "rows": rows}
+
+
+def format_scaling(result: dict[str, Any]) -> str:
+    p = result["params"]
+    lines = [
+        f"Scaling, suite {result['suite']} ({p['bits_scheme']}), random paths in "
+        f"[-{p['grid_range']}, {p['grid_range']}]^2, l = {p['comparison_bits']} bits, "
+        f"kappa {p['kappa']}:",
+        "",
+        "| n = m | pairs | correct | total bytes | bytes per pair | round trips "
+        "| Alice CPU s | Bob CPU s |",
+        "|---:|---:|---|---:|---:|---:|---:|---:|",
+    ]
+    for r in result["rows"]:
+        lines.append(
+            f"| {r['segments']} | {r['pairs']} | {'yes' if r['correct'] else 'NO'} "
+            f"| {r['bytes_total']} | {r['bytes_per_pair']:.0f} | {r['round_trips']:.0f} "
+            f"| {r['cpu_s_alice']:.2f} | {r['cpu_s_bob']:.2f} |"
+        )
+    return "\n".join(lines)

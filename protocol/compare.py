@@ -1,0 +1,180 @@
+"""``python -m protocol compare ALICE BOB``: run both parties in one process, on real bytes.
+
+Keys are generated once per invocation (reported separately, as a drone does it once) and
+reused across the cases of the files.  Each case runs the full eight-message protocol through
+:func:`protocol.loopback.run_paths`, so the byte counts are the frames a radio would carry and
+the CPU seconds are each party's own steps.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .errors import InputRangeError
+from .formats import InputFormatError, parse_paper_text, parse_plan, read_text
+from .geometry import Point, path_hits
+from .grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
+from .intersection import Alice, Bob, BobKeys, Limits, generate_bits_key
+from .loopback import run_paths
+from .wire import Suite
+from .zerotest import ZeroTestPrivateKey
+
+SUITES = {"compact": Suite.COMPACT, "paper": Suite.PAPER}
+
+
+@dataclass(frozen=True)
+class Case:
+    alice: tuple[Point, ...]
+    bob: tuple[Point, ...]
+    grid: GridSpec
+
+
+def _is_plan(path: str | Path, text: str) -> bool:
+    return str(path).endswith(".plan") or text.lstrip().startswith("{")
+
+
+def load_cases(
+    alice_file: str | Path,
+    bob_file: str | Path,
+    *,
+    range_: int | None = None,
+    resolution_mm: int = DEFAULT_RESOLUTION_MM,
+    radius_m: float = DEFAULT_RADIUS_M,
+) -> list[Case]:
+    """Pair line k of ALICE with line k of BOB (paper format) or two plans (one case)."""
+    a_text, b_text = read_text(alice_file), read_text(bob_file)
+    a_plan, b_plan = _is_plan(alice_file, a_text), _is_plan(bob_file, b_text)
+    if a_plan != b_plan:
+        raise InputFormatError("both files must be plans, or both in the paper's format")
+    if a_plan:
+        a_geo, b_geo = parse_plan(a_text, str(alice_file)), parse_plan(b_text, str(bob_file))
+        lat, lon = a_geo[0]
+        if range_ is not None:
+            grid = GridSpec(GridKind.GEO, range_, lat, lon, resolution_mm)
+        else:
+            grid = GridSpec.geo(lat, lon, resolution_mm=resolution_mm, radius_m=radius_m)
+        return [Case(grid.project_path(a_geo), grid.project_path(b_geo), grid)]
+    a_cases = parse_paper_text(a_text, str(alice_file))
+    b_cases = parse_paper_text(b_text, str(bob_file))
+    if len(a_cases) != len(b_cases):
+        raise InputFormatError(
+            f"{alice_file} has {len(a_cases)} paths but {bob_file} has {len(b_cases)}"
+        )
+    if range_ is None:
+        # The range is public: both operators agree on it.  Here: the files' extent.
+        range_ = max(
+            max(abs(c) for p in a + b for c in p) for a, b in zip(a_cases, b_cases, strict=True)
+        )
+    grid = GridSpec(GridKind.PLANE, max(1, range_))
+    for a, b in zip(a_cases, b_cases, strict=True):
+        grid.check_points(a)
+        grid.check_points(b)
+    return [Case(a, b, grid) for a, b in zip(a_cases, b_cases, strict=True)]
+
+
+@dataclass
+class Party:
+    """Long-lived keys of the two drones for one invocation."""
+
+    suite: Suite
+    alice_keys: dict[Suite, ZeroTestPrivateKey[Any]]
+    bob_keys: BobKeys
+    keygen_s: dict[str, float]
+
+    @classmethod
+    def generate(cls, suite: Suite) -> Party:
+        start = time.process_time()
+        alice = {suite: generate_bits_key(suite)}
+        mid = time.process_time()
+        bob = BobKeys.generate((suite,))
+        end = time.process_time()
+        return cls(suite, alice, bob, {"alice": mid - start, "bob": end - mid})
+
+
+def run_case(case: Case, party: Party, limits: Limits | None = None) -> dict[str, Any]:
+    limits = limits or Limits()
+    alice = Alice(case.alice, case.grid, party.alice_keys, limits=limits)
+    bob = Bob(case.bob, party.bob_keys, limits=limits)
+    t = run_paths(alice, bob)
+    return {
+        "hits": alice.hits,
+        "plain_hits": path_hits(case.alice, case.bob),
+        "bytes_alice_to_bob": t.bytes_alice_to_bob,
+        "bytes_bob_to_alice": t.bytes_bob_to_alice,
+        "messages": t.messages,
+        "round_trips": t.round_trips,
+        "cpu_s_alice": t.cpu_alice,
+        "cpu_s_bob": t.cpu_bob,
+        "message_sizes": dict(t.sizes),
+    }
+
+
+def params_of(party: Party, grid: GridSpec, kappa: int = 40) -> dict[str, Any]:
+    bits = party.bob_keys.bits[party.suite].public_key
+    return {
+        "paillier_bits": int(party.bob_keys.paillier.public_key.n.bit_length()),
+        "bits_scheme": bits.name,
+        "kappa": kappa,
+        "grid_kind": grid.kind.name.lower(),
+        "grid_range": grid.range,
+        "resolution_mm": grid.resolution_mm,
+        "comparison_bits": grid.l,
+        "keygen_s": party.keygen_s,
+    }
+
+
+def compare(
+    alice_file: str | Path,
+    bob_file: str | Path,
+    suite_name: str = "compact",
+    *,
+    range_: int | None = None,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Everything ``compare --json`` prints."""
+    cases = load_cases(alice_file, bob_file, range_=range_)
+    party = Party.generate(SUITES[suite_name])
+    results = []
+    for number, case in enumerate(cases, start=1):
+        if progress:
+            print(f"  ... case {number}/{len(cases)}", flush=True, file=_stderr())
+        results.append(run_case(case, party))
+    return {"suite": suite_name, "params": params_of(party, cases[0].grid), "cases": results}
+
+
+def _stderr() -> Any:
+    import sys
+
+    return sys.stderr
+
+
+def format_compare(result: dict[str, Any]) -> str:
+    p = result["params"]
+    lines = [
+        f"suite {result['suite']} ({p['bits_scheme']}), Paillier {p['paillier_bits']} bits, "
+        f"kappa {p['kappa']}, grid range +-{p['grid_range']} -> l = {p['comparison_bits']} bits",
+        "",
+        "| case | hits (Alice's segments) | plaintext | A->B bytes | B->A bytes | msgs "
+        "| Alice CPU s | Bob CPU s |",
+        "|---:|---|---|---:|---:|---:|---:|---:|",
+    ]
+
+    def bits(values: Sequence[bool]) -> str:
+        return "".join("1" if v else "0" for v in values)
+
+    for number, c in enumerate(result["cases"], start=1):
+        lines.append(
+            f"| {number} | {bits(c['hits'])} | {bits(c['plain_hits'])} "
+            f"| {c['bytes_alice_to_bob']} | {c['bytes_bob_to_alice']} | {c['messages']} "
+            f"| {c['cpu_s_alice']:.3f} | {c['cpu_s_bob']:.3f} |"
+        )
+    agree = sum(c["hits"] == c["plain_hits"] for c in result["cases"])
+    lines += ["", f"{agree}/{len(result['cases'])} cases agree with the plaintext predicate."]
+    return "\n".join(lines)
+
+
+__all__ = ["Case", "InputRangeError", "Party", "compare", "format_compare", "load_cases"]
