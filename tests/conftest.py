@@ -43,3 +43,24 @@ def keys() -> Keys:
         DGKPublicKey.from_bytes(dgk.public_key.to_bytes()),
         ECPublicKey.from_bytes(ec.public_key.to_bytes()),
     )
+
+
+@dataclass(frozen=True)
+class PathKeys:
+    """Long-lived keys of two drones for the path protocol (both suites)."""
+
+    bob: Any  # protocol.intersection.BobKeys
+    alice: dict[Any, Any]  # Suite -> Alice's zero-test private key
+
+
+@pytest.fixture(scope="session")
+def path_keys(keys: Keys) -> PathKeys:
+    from protocol.intersection import DGK_COUNT_BITS, BobKeys
+    from protocol.wire import Suite
+
+    bob = BobKeys(keys.paillier, {Suite.COMPACT: keys.ec, Suite.PAPER: keys.dgk})
+    alice = {
+        Suite.COMPACT: ECPrivateKey.generate(),
+        Suite.PAPER: DGKPrivateKey.generate(comparison_bits=DGK_COUNT_BITS),
+    }
+    return PathKeys(bob, alice)

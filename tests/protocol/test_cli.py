@@ -1,0 +1,50 @@
+"""``python -m protocol compare`` end to end, as a user runs it (a real subprocess)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "protocol", *args], capture_output=True, text=True, timeout=300
+    )
+
+
+def test_compare_json(tmp_path: Path) -> None:
+    alice, bob = tmp_path / "alice.txt", tmp_path / "bob.txt"
+    alice.write_text("(0,0)(10,10)\n(0,0)(5,0)(5,5)\n")
+    bob.write_text("(0,10)(10,0)\n(5,0)(9,0)\n")
+    result = run_cli("compare", str(alice), str(bob), "--json")
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert (
+        out["suite"] == "compact" and out["params"]["comparison_bits"] == 11
+    )  # range 10: 2^11 > 16 * 100 + 1
+    first, second = out["cases"]
+    assert first["hits"] == first["plain_hits"] == [True]
+    assert second["hits"] == second["plain_hits"] == [True, True]
+    for case in out["cases"]:
+        assert case["messages"] == 8 and case["round_trips"] == 4
+        assert case["bytes_alice_to_bob"] > 0 and case["cpu_s_bob"] > 0
+
+
+@pytest.mark.parametrize(
+    ("alice", "bob", "message"),
+    [
+        ("(0,0)(1,1)\n", "(0,0)(1,1)\n(2,2)(3,3)\n", "has 1 paths"),
+        ("(0,0)\n", "(0,0)(1,1)\n", "two points"),
+    ],
+)
+def test_compare_refuses_bad_input(tmp_path: Path, alice: str, bob: str, message: str) -> None:
+    a, b = tmp_path / "a.txt", tmp_path / "b.txt"
+    a.write_text(alice)
+    b.write_text(bob)
+    result = run_cli("compare", str(a), str(b))
+    assert result.returncode == 2 and message in result.stderr
+    assert "Traceback" not in result.stderr

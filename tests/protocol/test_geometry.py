@@ -1,0 +1,78 @@
+"""The circuit the protocol evaluates is exactly the closed-segment predicate (shapely oracle)."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import LineString
+from shapely.geometry import Point as ShapelyPoint
+
+from protocol.geometry import (
+    circuit,
+    orient,
+    orient_coefficients,
+    path_hits,
+    projection_key,
+    segment_terms,
+    segments_intersect,
+)
+
+from .adversarial import ADVERSARIAL, R
+
+
+def shapely_intersects(a, b, c, d) -> bool:  # type: ignore[no-untyped-def]
+    first = ShapelyPoint(a) if a == b else LineString([a, b])
+    second = ShapelyPoint(c) if c == d else LineString([c, d])
+    return bool(first.intersects(second))
+
+
+@pytest.mark.parametrize(("name", "pair"), ADVERSARIAL, ids=[n for n, _ in ADVERSARIAL])
+def test_adversarial_cases(name: str, pair) -> None:  # type: ignore[no-untyped-def]
+    a, b, c, d = pair
+    expected = shapely_intersects(a, b, c, d)
+    assert segments_intersect(a, b, c, d) is expected
+    assert circuit(a, b, c, d, 2 * R) == int(expected)
+    # the predicate is symmetric; the circuit must be too
+    assert circuit(c, d, a, b, 2 * R) == int(expected)
+
+
+def points(bound: int) -> st.SearchStrategy[tuple[int, int]]:
+    return st.tuples(st.integers(-bound, bound), st.integers(-bound, bound))
+
+
+@settings(max_examples=3000, deadline=None)
+@given(points(3), points(3), points(3), points(3))
+def test_circuit_matches_shapely_on_a_tiny_grid(a, b, c, d) -> None:  # type: ignore[no-untyped-def]
+    """A 7 x 7 grid makes collinear and touching cases the common case."""
+    expected = shapely_intersects(a, b, c, d)
+    assert segments_intersect(a, b, c, d) is expected
+    assert circuit(a, b, c, d, 6) == int(expected)
+
+
+@settings(max_examples=2000, deadline=None)
+@given(points(R), points(R), points(R), points(R))
+def test_circuit_matches_shapely_on_the_paper_range(a, b, c, d) -> None:  # type: ignore[no-untyped-def]
+    expected = shapely_intersects(a, b, c, d)
+    assert circuit(a, b, c, d, 2 * R) == int(expected)
+
+
+@settings(max_examples=300, deadline=None)
+@given(points(R), points(R), points(R), points(R))
+def test_linear_forms(a, b, c, d) -> None:  # type: ignore[no-untyped-def]
+    """The forms Alice evaluates on Bob's ciphertexts equal the plaintext values."""
+    alpha, beta, gamma = orient_coefficients(a, b)
+    assert alpha * c[0] + beta * c[1] + gamma == orient(a, b, c)
+    dx, dy, k = segment_terms(c, d)
+    assert a[1] * dx - a[0] * dy + k == orient(c, d, a)
+    ex, ey, off, t = projection_key(a, b, 2 * R)
+    bound = 8 * R * R
+    assert abs(ex * c[0] + ey * c[1] + off) <= bound
+    assert 0 <= t <= bound
+
+
+def test_path_hits_on_the_paper_routes() -> None:
+    alice = ((0, 0), (10, 0), (10, 10))
+    bob = ((5, -5), (5, 5), (20, 5))
+    assert path_hits(alice, bob) == [True, True]
+    assert path_hits(alice, ((50, 50), (60, 60))) == [False, False]
