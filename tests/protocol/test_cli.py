@@ -48,3 +48,9 @@ def test_compare_refuses_bad_input(tmp_path: Path, alice: str, bob: str, message
     result = run_cli("compare", str(a), str(b))
     assert result.returncode == 2 and message in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_demo_runs_and_agrees_with_the_plaintext() -> None:
+    result = run_cli("demo")
+    assert result.returncode == 0, result.stderr
+    assert "CROSSES" in result.stdout and "Bob learns nothing." in result.stdout
