@@ -52,6 +52,7 @@ from .wire import Hello, KeysHeader, MsgType, Suite, frame, unframe
 from .zerotest import ZeroTestPrivateKey, ZeroTestPublicKey
 
 MAX_SEGMENTS = 256
+MAX_MODULUS_BITS = 4096  # bounds the work a peer's key can impose
 DGK_COUNT_BITS = 85  # DGK u = 263: holds comparison terms for l <= 86 and counts up to 256
 
 AND = (0, 0, 0, 1)
@@ -196,6 +197,8 @@ def read_bits_key(
 ) -> ZeroTestPublicKey[Any]:
     if suite is Suite.COMPACT:
         return ECPublicKey.from_bytes(data)
+    if len(data) > 3 * (MAX_MODULUS_BITS // 8) + 4:
+        raise RemoteProtocolError("peer's DGK modulus is larger than 4096 bits")
     return DGKPublicKey.from_bytes(data, insecure_for_tests=insecure_for_tests)
 
 
@@ -312,6 +315,8 @@ class Alice(_Machine):
         self.paillier = PaillierPublicKey.from_bytes(
             head.paillier_key, insecure_for_tests=self.insecure
         )
+        if self.paillier.n.bit_length() > MAX_MODULUS_BITS:
+            raise RemoteProtocolError("peer's Paillier modulus is larger than 4096 bits")
         self.bits = read_bits_key(head.suite, head.bits_key, insecure_for_tests=self.insecure)
         if 3 * self.l + 3 >= self.bits.plaintext_modulus:
             raise RemoteProtocolError("peer's zero-test plaintext space is too small")

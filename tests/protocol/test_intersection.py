@@ -194,3 +194,23 @@ def test_bob_path_outside_alices_grid(path_keys: Any) -> None:
         Bob(((0, 0), (50, 50)), path_keys.bob).receive(alice.start())
     with pytest.raises(InputRangeError):
         Alice(((0, 0), (11, 0)), GridSpec(GridKind.PLANE, 10), dict(path_keys.alice))
+
+
+def test_oversized_peer_keys_are_refused(path_keys: Any) -> None:
+    from protocol.intersection import read_bits_key
+
+    with pytest.raises(RemoteProtocolError, match="4096"):
+        read_bits_key(Suite.PAPER, bytes([1]) * (3 * 1024 + 4))
+    alice = Alice(((0, 0), (1, 1)), GRID, {Suite.COMPACT: path_keys.alice[Suite.COMPACT]})
+    alice.start()
+    from protocol.wire import KeysHeader, MsgType, frame
+
+    big_n = (1 << 8191) | 1  # odd, 8192 bits
+    head = KeysHeader(
+        Suite.COMPACT,
+        1,
+        big_n.to_bytes(1024, "big"),
+        path_keys.bob.bits[Suite.COMPACT].public_key.to_bytes(),
+    )
+    with pytest.raises(RemoteProtocolError):
+        alice.receive(frame(MsgType.KEYS, head.to_bytes()))
