@@ -8,13 +8,13 @@ the CPU seconds are each party's own steps.
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .errors import InputRangeError
 from .formats import InputFormatError, parse_paper_text, parse_plan, read_text
 from .geometry import Point, path_hits
 from .grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
@@ -141,15 +141,9 @@ def compare(
     results = []
     for number, case in enumerate(cases, start=1):
         if progress:
-            print(f"  ... case {number}/{len(cases)}", flush=True, file=_stderr())
+            print(f"  ... case {number}/{len(cases)}", flush=True, file=sys.stderr)
         results.append(run_case(case, party))
     return {"suite": suite_name, "params": params_of(party, cases[0].grid), "cases": results}
-
-
-def _stderr() -> Any:
-    import sys
-
-    return sys.stderr
 
 
 def format_compare(result: dict[str, Any]) -> str:
@@ -175,6 +169,3 @@ def format_compare(result: dict[str, Any]) -> str:
     agree = sum(c["hits"] == c["plain_hits"] for c in result["cases"])
     lines += ["", f"{agree}/{len(result['cases'])} cases agree with the plaintext predicate."]
     return "\n".join(lines)
-
-
-__all__ = ["Case", "InputRangeError", "Party", "compare", "format_compare", "load_cases"]

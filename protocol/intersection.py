@@ -355,16 +355,18 @@ class Alice(_Machine):
         masked: list[bytes] = []
         position = 0
         for group in self.layout.ciphertexts:
-            acc: PaillierCiphertext | None = None
-            plain = 0
-            for piece in reversed(group):
-                value, constant = piece_value(piece)
-                acc = value if acc is None else acc * (1 << (self.w * piece.length)) + value
-                for s in reversed(range(piece.length)):
-                    r = self._r[position + _offset(group, piece) + s]
-                    plain = (plain << self.w) + constant + (1 << self.l) + r
-            assert acc is not None
-            position += sum(p.length for p in group)
+            parts = [piece_value(piece) for piece in group]
+            acc = parts[-1][0]  # Horner: sum_j piece_j 2^(w offset_j), last piece first
+            for piece, (value, _) in zip(group[-2::-1], parts[-2::-1], strict=True):
+                acc = acc * (1 << (self.w * piece.length)) + value
+            constants = [
+                c for piece, (_, c) in zip(group, parts, strict=True) for _ in range(piece.length)
+            ]
+            plain = sum(
+                (c + (1 << self.l) + self._r[position + slot]) << (self.w * slot)
+                for slot, c in enumerate(constants)
+            )
+            position += len(constants)
             masked.append((acc + plain).rerandomize().to_bytes())
         self.state = State.WAIT_BITS
         return frame(MsgType.MASKED, b"".join(masked))
@@ -459,15 +461,6 @@ def _gate(
     p, q = PRODUCTS[which]
     c, c1, c2, c12 = bilinear(table, known[p], known[q])
     return weight * c, [(enc[p], weight * c1), (enc[q], weight * c2), (prod[which], weight * c12)]
-
-
-def _offset(group: list[Piece], piece: Piece) -> int:
-    offset = 0
-    for other in group:
-        if other is piece:
-            return offset
-        offset += other.length
-    raise AssertionError("piece not in group")
 
 
 # --------------------------------------------------------------------------- Bob
