@@ -21,7 +21,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff format --check protocol companion tests scripts
 
 typecheck: $(STAMP)
-	$(VENV)/bin/mypy --strict protocol
+	$(VENV)/bin/mypy --strict protocol companion
 
 test: lint typecheck
 	$(VENV)/bin/pytest

@@ -19,7 +19,33 @@ def _demo(_args: argparse.Namespace) -> int:
 def _compare(args: argparse.Namespace) -> int:
     from .compare import compare, format_compare
 
-    result = compare(args.alice, args.bob, args.suite, range_=args.range, progress=not args.json)
+    if args.link is not None:
+        # The radio is the companion's business (I/O); the protocol package stays pure.
+        from companion.link import Impairments, profile
+        from companion.over_link import compare_over_link
+
+        try:
+            link, impairments = (
+                profile(args.link),
+                Impairments(loss=args.loss, corrupt=args.corrupt),
+            )
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        result = compare_over_link(
+            args.alice,
+            args.bob,
+            args.suite,
+            link,
+            impairments,
+            args.seed,
+            range_=args.range,
+            progress=not args.json,
+        )
+    else:
+        result = compare(
+            args.alice, args.bob, args.suite, range_=args.range, progress=not args.json
+        )
     print(json.dumps(result, indent=2) if args.json else format_compare(result))
     return 0 if all(c["hits"] == c["plain_hits"] for c in result["cases"]) else 1
 
@@ -31,6 +57,17 @@ def _bench(args: argparse.Namespace) -> int:
 
         result = bench_crypto(repeat=args.repeat, progress=not args.quiet)
         text = format_crypto(result)
+    elif args.what == "link":
+        from companion.over_link import bench_link, format_link
+
+        from .bench_paths import DEFAULT_DATA
+
+        data = Path(args.data) if args.data else DEFAULT_DATA
+        profiles = args.profiles.split(",") if args.profiles else None
+        result = bench_link(
+            data, profiles, suite=args.suite, range_=args.range or 99, progress=not args.quiet
+        )
+        text = format_link(result)
     elif args.what == "paper":
         from .bench_paths import DEFAULT_DATA, bench_paper, format_paper
 
@@ -59,14 +96,29 @@ def main(argv: list[str] | None = None) -> int:
     compare.add_argument("--suite", choices=["compact", "paper"], default="compact")
     compare.add_argument("--range", type=int, default=None, help="public grid range R")
     compare.add_argument("--json", action="store_true", help="machine-readable output")
+    compare.add_argument(
+        "--link",
+        metavar="PROFILE",
+        default=None,
+        help="run through the simulated radio: eu868-sf7, eu868-sf9, eu868-sf12, us915-sf7, "
+        "us915-sf9 or ideal",
+    )
+    compare.add_argument("--loss", type=float, default=0.0, help="frame loss probability (--link)")
+    compare.add_argument(
+        "--corrupt", type=float, default=0.0, help="frame corruption probability (--link)"
+    )
+    compare.add_argument("--seed", type=int, default=None, help="channel seed (--link)")
     compare.set_defaults(func=_compare)
 
     bench = sub.add_parser("bench", help="benchmarks that print tables")
-    bench.add_argument("what", choices=["crypto", "paper", "scaling"], help="what to measure")
+    bench.add_argument(
+        "what", choices=["crypto", "paper", "scaling", "link"], help="what to measure"
+    )
     bench.add_argument("--suite", choices=["compact", "paper"], default="compact")
     bench.add_argument("--data", help="directory with the paper's data (paper)")
     bench.add_argument("--sizes", default="1,2,4,8,16,32", help="n = m values (scaling)")
     bench.add_argument("--range", type=int, default=None, help="coordinate range (scaling)")
+    bench.add_argument("--profiles", help="comma-separated link profiles (link; default all)")
     bench.add_argument("--json", action="store_true", help="machine-readable output")
     bench.add_argument("--repeat", type=int, default=15, help="runs per median (crypto)")
     bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -134,15 +134,17 @@ def compare(
     *,
     range_: int | None = None,
     progress: bool = False,
+    run: Callable[[Case, Party], dict[str, Any]] = run_case,
 ) -> dict[str, Any]:
-    """Everything ``compare --json`` prints."""
+    """Everything ``compare --json`` prints; ``run`` carries one case (in memory by default,
+    the companion passes one that goes through the simulated radio)."""
     cases = load_cases(alice_file, bob_file, range_=range_)
     party = Party.generate(SUITES[suite_name])
     results = []
     for number, case in enumerate(cases, start=1):
         if progress:
             print(f"  ... case {number}/{len(cases)}", flush=True, file=sys.stderr)
-        results.append(run_case(case, party))
+        results.append(run(case, party))
     return {"suite": suite_name, "params": params_of(party, cases[0].grid), "cases": results}
 
 
@@ -166,6 +168,21 @@ def format_compare(result: dict[str, Any]) -> str:
             f"| {c['bytes_alice_to_bob']} | {c['bytes_bob_to_alice']} | {c['messages']} "
             f"| {c['cpu_s_alice']:.3f} | {c['cpu_s_bob']:.3f} |"
         )
+    if "link" in result:
+        link = result["link"]
+        lines += [
+            "",
+            f"link {link['profile']} ({link['frame_bytes']}-byte frames), loss {link['loss']:.0%}, "
+            f"corruption {link['corrupt']:.0%}, seed {link['seed']}",
+            "",
+            "| case | frames | retransmitted | bytes on air | airtime s | simulated s |",
+            "|---:|---:|---:|---:|---:|---:|",
+        ]
+        for number, c in enumerate(result["cases"], start=1):
+            lines.append(
+                f"| {number} | {c['frames_sent']} | {c['frames_retransmitted']} "
+                f"| {c['bytes_on_air']} | {c['airtime_s']:.1f} | {c['wall_s_simulated']:.1f} |"
+            )
     agree = sum(c["hits"] == c["plain_hits"] for c in result["cases"])
     lines += ["", f"{agree}/{len(result['cases'])} cases agree with the plaintext predicate."]
     return "\n".join(lines)

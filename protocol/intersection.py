@@ -234,6 +234,11 @@ class _Machine:
             self.state = State.FAILED
             raise RemoteProtocolError(f"malformed message: {exc}") from exc
 
+    def abort(self) -> None:
+        """End the run here (peer gone, time limit): FAILED unless it already finished."""
+        if self.state is not State.DONE:
+            self.state = State.FAILED
+
     def _step(self, data: bytes) -> bytes | None:
         raise NotImplementedError
 

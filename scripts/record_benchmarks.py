@@ -1,6 +1,6 @@
 """Re-run the benchmarks and rewrite their sections of docs/benchmarks.md.
 
-Usage: .venv/bin/python scripts/record_benchmarks.py [crypto] [paper] [paper-dgk] [scaling]
+Usage: .venv/bin/python scripts/record_benchmarks.py [crypto] [paper] [paper-dgk] [scaling] [link]
 (default: all) [--repeat N]
 
 Each section sits between markers ``<!-- bench NAME -->`` and ``<!-- /bench NAME -->``; the
@@ -17,6 +17,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from companion.over_link import bench_link, format_link
 from protocol.bench import bench_crypto, format_crypto
 from protocol.bench_paths import bench_paper, bench_scaling, format_paper, format_scaling
 
@@ -29,6 +30,7 @@ def sections(repeat: int) -> dict[str, Callable[[], str]]:
         "paper": lambda: format_paper(bench_paper(suite="compact")),
         "paper-dgk": lambda: format_paper(bench_paper(suite="paper")),
         "scaling": lambda: format_scaling(bench_scaling()),
+        "link": lambda: format_link(bench_link()),
     }
 
 

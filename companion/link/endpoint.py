@@ -1,0 +1,435 @@
+"""An asyncio link endpoint: reliable messages over one radio, within its regulation.
+
+Drives the pure pieces (``frames``, ``reassembly``, ``arq``, ``airtime``) with a transport and
+a clock.  One radio, so one transmit queue: control frames (ACK, POLL, ABORT) go before data,
+every frame waits for the duty-cycle budget (data leaves a reserve for control) and frames are
+spaced by the radio's turnaround time.  Messages travel in *sessions* (peer, 16-bit id); a
+session's messages are sent one at a time and arrive in order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import random
+import secrets
+from collections import deque
+from dataclasses import dataclass, field
+
+from .airtime import DutyCycle, LinkProfile
+from .arq import (
+    LinkError,
+    LinkTimeout,
+    MessageTooLarge,
+    Outgoing,
+    PeerAborted,
+    RetransmissionTimer,
+)
+from .clock import Clock
+from .frames import (
+    BROADCAST,
+    MAX_ACK_BITMAP,
+    OVERHEAD,
+    Frame,
+    FrameError,
+    FrameType,
+    abort_payload,
+    decode_frame,
+)
+from .medium import Transport
+from .reassembly import Delivered, Receiver
+
+_JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
+
+ABORT_PROTOCOL = 1  # the peer's message failed the protocol's checks
+ABORT_TIMEOUT = 2  # a time limit of the run passed
+ABORT_SHUTDOWN = 3  # the process is stopping
+ABORT_REFUSED = 4  # not now (run budget, busy)
+ABORT_LINK = 5  # the link gave up (retries exhausted)
+
+
+def _consume(future: asyncio.Future[float]) -> None:
+    future.exception()  # marks the exception retrieved
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    """Tunables of the link; defaults suit every profile."""
+
+    max_message: int = 1 << 20
+    window: int = 64
+    max_tries: int = 24
+    max_polls: int = 20
+    max_partial: int = 8
+    max_sessions: int = 32
+    control_reserve: float = 0.1
+    latency_allowance_s: float = 0.05
+    idle_timeout_s: float | None = None  # None: derived from the profile
+
+    def idle_timeout(self, profile: LinkProfile) -> float:
+        """How long silence from a peer is tolerated.  On a duty-cycled link a peer that spent
+        its budget is silent for up to a window, and lost frames stretch that: three windows."""
+        if self.idle_timeout_s is not None:
+            return self.idle_timeout_s
+        return 3 * profile.duty_window_s + 600.0 if profile.duty_cycle else 300.0
+
+
+@dataclass
+class LinkStats:
+    frames_sent: int = 0
+    frames_retransmitted: int = 0
+    polls_sent: int = 0
+    acks_sent: int = 0
+    bytes_sent: int = 0
+    airtime_s: float = 0.0
+    duty_wait_s: float = 0.0
+    frames_received: int = 0
+    messages_sent: int = 0
+    messages_received: int = 0
+    dropped: dict[str, int] = field(default_factory=dict)
+
+    def drop(self, reason: str) -> None:
+        self.dropped[reason] = self.dropped.get(reason, 0) + 1
+
+
+@dataclass
+class _TxItem:
+    data: bytes
+    airtime: float
+    control: bool
+    done: asyncio.Future[float]
+
+
+@dataclass
+class _Session:
+    peer: int
+    session: int
+    last_heard: float
+    inbox: asyncio.Queue[bytes | PeerAborted] = field(default_factory=asyncio.Queue)
+    send_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
+    next_seq: int = 0
+    aborted: PeerAborted | None = None
+
+
+class LinkEndpoint:
+    """Node ``node`` on a radio ``transport`` under ``profile``."""
+
+    def __init__(
+        self,
+        node: int,
+        transport: Transport,
+        profile: LinkProfile,
+        config: LinkConfig | None = None,
+        clock: Clock | None = None,
+    ) -> None:
+        if not 0 <= node < BROADCAST:
+            raise ValueError(f"node id {node} outside 0..{BROADCAST - 1}")
+        self.node = node
+        self.transport = transport
+        self.profile = profile
+        self.config = config or LinkConfig()
+        self.clock = clock or Clock()
+        self.frame_size = profile.max_frame
+        self.payload_size = self.frame_size - OVERHEAD
+        if self.payload_size < 16:
+            raise ValueError(f"profile {profile.name} leaves no room for payload")
+        self.idle_timeout = self.config.idle_timeout(profile)
+        self.stats = LinkStats()
+        self.receiver = Receiver(
+            node,
+            max_message=self.config.max_message,
+            max_partial=self.config.max_partial,
+            idle_timeout=self.idle_timeout,
+        )
+        self.duty = DutyCycle(profile.budget_s, profile.duty_window_s, self.config.control_reserve)
+        self.beacons: asyncio.Queue[tuple[int, bytes]] = asyncio.Queue(maxsize=64)
+        self._control: deque[_TxItem] = deque()
+        self._data: deque[_TxItem] = deque()
+        self._wake = asyncio.Event()
+        self._sessions: dict[tuple[int, int], _Session] = {}
+        self._closed: dict[tuple[int, int], float] = {}
+        self._accept: asyncio.Queue[tuple[int, int]] = asyncio.Queue()
+        self._outgoing: dict[tuple[int, int, int], tuple[Outgoing, asyncio.Event]] = {}
+        self._heard: dict[int, float] = {}
+        self._timers: dict[int, RetransmissionTimer] = {}
+        self._tasks: list[asyncio.Task[None]] = []
+        self._running = False
+
+    # ------------------------------------------------------------------ lifecycle
+
+    async def start(self) -> None:
+        self._running = True
+        self.transport.set_receiver(self._on_bytes)
+        self._tasks = [
+            asyncio.create_task(self._tx_loop(), name=f"link-tx-{self.node}"),
+            asyncio.create_task(self._housekeeping(), name=f"link-gc-{self.node}"),
+        ]
+
+    async def close(self) -> None:
+        self._running = False
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        for item in (*self._control, *self._data):
+            if not item.done.done():  # a sender waiting on it gets the error, nobody else
+                item.done.set_exception(LinkError("link endpoint closed"))
+                item.done.add_done_callback(_consume)
+        self._control.clear()
+        self._data.clear()
+        await self.transport.close()
+
+    async def __aenter__(self) -> LinkEndpoint:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    # ------------------------------------------------------------------ sessions
+
+    def open(self, peer: int, session: int | None = None) -> int:
+        """Start a session with ``peer``; returns its id (random unless given)."""
+        while session is None or (peer, session) in self._sessions:
+            session = secrets.randbelow(0xFFFF) + 1
+        self._closed.pop((peer, session), None)
+        self._sessions[(peer, session)] = _Session(peer, session, self.clock.now())
+        return session
+
+    async def accept(self, timeout: float | None = None) -> tuple[int, int]:
+        """Wait for a peer to start a session; its first message is ready to ``receive``."""
+        async with self.clock.timeout(timeout):
+            return await self._accept.get()
+
+    def close_session(self, peer: int, session: int) -> None:
+        """Forget a session: its buffers are freed, late frames are ignored."""
+        self._sessions.pop((peer, session), None)
+        self._closed[(peer, session)] = self.clock.now()
+        self.receiver.forget_session(peer, session)
+
+    def abort(self, peer: int, session: int, code: int, text: str = "") -> None:
+        """Tell the peer the session is over (best effort, twice) and close it here."""
+        frame = Frame(FrameType.ABORT, self.node, peer, session, payload=abort_payload(code, text))
+        for _ in range(2 if self._running else 0):
+            self._enqueue(frame, control=True)
+        self.close_session(peer, session)
+
+    def _session(self, peer: int, session: int) -> _Session:
+        try:
+            return self._sessions[(peer, session)]
+        except KeyError:
+            raise LinkError(f"no open session {session} with node {peer}") from None
+
+    # ------------------------------------------------------------------ messages
+
+    async def send(self, peer: int, session: int, data: bytes) -> None:
+        """Deliver ``data`` reliably to ``peer`` (returns once it acknowledged all of it)."""
+        sess = self._session(peer, session)
+        if len(data) > self.config.max_message:
+            raise MessageTooLarge(f"{len(data)} bytes > max_message {self.config.max_message}")
+        async with sess.send_lock:
+            seq, sess.next_seq = sess.next_seq, (sess.next_seq + 1) & 0xFF
+            out = Outgoing(
+                self.node,
+                peer,
+                session,
+                seq,
+                data,
+                self.payload_size,
+                window=self.config.window,
+                max_tries=self.config.max_tries,
+                max_polls=self.config.max_polls,
+            )
+            acked = asyncio.Event()
+            self._outgoing[(peer, session, seq)] = (out, acked)
+            try:
+                while not out.complete:
+                    self._raise_if_aborted(sess)
+                    acked.clear()
+                    frames = out.burst()
+                    fresh = out.tries[frames[-1].index] == 1
+                    done = [self._enqueue(f, control=False) for f in frames]
+                    sent_at = await done[-1]
+                    await self._await_ack(out, acked, sess, sent_at, sample=fresh)
+            finally:
+                del self._outgoing[(peer, session, seq)]
+                self.stats.frames_retransmitted += out.retransmissions
+            sess.last_heard = self.clock.now()
+            self.stats.messages_sent += 1
+
+    async def _await_ack(
+        self, out: Outgoing, acked: asyncio.Event, sess: _Session, sent_at: float, sample: bool
+    ) -> None:
+        timer = self._timer(sess.peer)
+        while True:
+            # Jitter: two nodes that both wait for an ACK must not probe in lockstep, or their
+            # probes collide forever.
+            wait = timer.rto * (1.0 + _JITTER.random() / 2)
+            try:
+                await self.clock.wait_for(acked.wait(), wait)
+            except TimeoutError:
+                self._raise_if_aborted(sess)
+                if self.clock.now() - sess.last_heard < timer.rto:
+                    continue  # the peer is on the air in this session: it cannot hear a poll
+                timer.timed_out()
+                acked.clear()
+                probe = out.probe()
+                sent_at, sample = await self._enqueue(probe, control=True), False
+                self.stats.polls_sent += probe.type is FrameType.POLL
+                continue
+            self._raise_if_aborted(sess)
+            timer.answered()
+            if sample:
+                timer.sample(self.clock.now() - sent_at)
+            return
+
+    async def receive(self, peer: int, session: int, idle_timeout: float | None = None) -> bytes:
+        """The session's next message; LinkTimeout after ``idle_timeout`` of silence."""
+        sess = self._session(peer, session)
+        limit = self.idle_timeout if idle_timeout is None else idle_timeout
+        while True:
+            if sess.inbox.empty():
+                self._raise_if_aborted(sess)
+            remaining = sess.last_heard + limit - self.clock.now()
+            if remaining <= 0 and sess.inbox.empty():
+                raise LinkTimeout(f"nothing from node {peer} for {limit:.0f} s")
+            try:
+                item = await self.clock.wait_for(sess.inbox.get(), max(remaining, 0.0))
+            except TimeoutError:
+                continue
+            if isinstance(item, PeerAborted):
+                raise item
+            self.stats.messages_received += 1
+            return item
+
+    async def beacon(self, payload: bytes) -> None:
+        """Broadcast one beacon frame (unacknowledged)."""
+        frame = Frame(FrameType.BEACON, self.node, BROADCAST, 0, payload=payload)
+        if len(frame.encode()) > self.frame_size:
+            raise MessageTooLarge(f"beacon of {len(payload)} bytes exceeds one frame")
+        await self._enqueue(frame, control=True)
+
+    def _raise_if_aborted(self, sess: _Session) -> None:
+        if sess.aborted is not None:
+            raise sess.aborted
+        if (sess.peer, sess.session) not in self._sessions:
+            raise LinkError(f"session {sess.session} with node {sess.peer} was closed")
+
+    def _timer(self, peer: int) -> RetransmissionTimer:
+        timer = self._timers.get(peer)
+        if timer is None:
+            p = self.profile
+            ack = p.airtime(OVERHEAD + 2 + MAX_ACK_BITMAP)
+            # The peer may still be sending one frame, then turns around and acknowledges.
+            model = (
+                p.airtime(self.frame_size)
+                + ack
+                + 2 * (p.turnaround_s + self.config.latency_allowance_s)
+            )
+            # A peer that spent its duty-cycle budget may stay silent for up to a window: the
+            # backoff must let 20 probes outlast that.  Elsewhere silence means trouble.
+            limit = p.duty_window_s / 8 if p.duty_cycle else 30 * model
+            timer = self._timers[peer] = RetransmissionTimer(model, limit)
+        return timer
+
+    # ------------------------------------------------------------------ radio
+
+    def _enqueue(self, frame: Frame, *, control: bool) -> asyncio.Future[float]:
+        if not self._running:
+            raise LinkError("link endpoint is not running")
+        data = frame.encode()
+        done: asyncio.Future[float] = asyncio.get_running_loop().create_future()
+        item = _TxItem(data, self.profile.airtime(len(data)), control, done)
+        (self._control if control else self._data).append(item)
+        self._wake.set()
+        return done
+
+    async def _tx_loop(self) -> None:
+        while True:
+            queue = self._control if self._control else self._data
+            if not queue:
+                self._wake.clear()
+                await self._wake.wait()
+                continue
+            item = queue[0]
+            now = self.clock.now()
+            start = self.duty.earliest(now, item.airtime, control=item.control)
+            if start > now:
+                self._wake.clear()
+                with contextlib.suppress(TimeoutError):
+                    await self.clock.wait_for(self._wake.wait(), start - now)
+                self.stats.duty_wait_s += self.clock.now() - now
+                continue  # re-evaluate: a control frame may have arrived
+            queue.popleft()
+            if item.done.cancelled():
+                continue
+            self.duty.record(now, item.airtime)
+            await self.transport.transmit(item.data, item.airtime)
+            self.stats.frames_sent += 1
+            self.stats.bytes_sent += len(item.data)
+            self.stats.airtime_s += item.airtime
+            if not item.done.done():
+                item.done.set_result(self.clock.now())
+            await self.clock.sleep(self.profile.turnaround_s)
+
+    async def _housekeeping(self) -> None:
+        while True:
+            await self.clock.sleep(max(self.idle_timeout / 4, 1.0))
+            now = self.clock.now()
+            self.receiver.expire(now)
+            for key in [k for k, t in self._closed.items() if now - t > self.idle_timeout]:
+                del self._closed[key]
+
+    def _on_bytes(self, data: bytes) -> None:
+        try:
+            frame = decode_frame(data)
+        except FrameError as exc:
+            self.stats.drop(exc.reason)
+            return
+        if frame.dst not in (self.node, BROADCAST):
+            return  # overheard: another pair's traffic
+        self.stats.frames_received += 1
+        now = self.clock.now()
+        self._heard[frame.src] = now
+        key = (frame.src, frame.session)
+        sess = self._sessions.get(key)
+        if sess is not None:
+            sess.last_heard = now
+        if frame.type in (FrameType.DATA, FrameType.POLL):
+            delivered, ack = self.receiver.on_frame(frame, now)
+            if ack is not None:
+                self._enqueue(ack, control=True)
+                self.stats.acks_sent += 1
+            if delivered is not None:
+                self._deliver(delivered, now)
+        elif frame.type is FrameType.ACK:
+            entry = self._outgoing.get((frame.src, frame.session, frame.seq))
+            if entry is not None and entry[0].on_ack(frame):
+                entry[1].set()
+        elif frame.type is FrameType.ABORT:
+            if sess is not None and sess.aborted is None:
+                sess.aborted = PeerAborted(frame.payload[0], frame.payload[1:].decode())
+                sess.inbox.put_nowait(sess.aborted)
+                for (peer, session, _), (_, event) in self._outgoing.items():
+                    if (peer, session) == key:
+                        event.set()
+            self.receiver.forget_session(*key)
+        elif frame.type is FrameType.BEACON:
+            if self.beacons.full():
+                self.beacons.get_nowait()
+            self.beacons.put_nowait((frame.src, frame.payload))
+
+    def _deliver(self, message: Delivered, now: float) -> None:
+        key = (message.src, message.session)
+        if key in self._closed:
+            self.stats.drop("closed_session")
+            return
+        sess = self._sessions.get(key)
+        if sess is None:
+            if len(self._sessions) >= self.config.max_sessions:
+                self.stats.drop("too_many_sessions")
+                return
+            sess = self._sessions[key] = _Session(message.src, message.session, now)
+            self._accept.put_nowait(key)
+        sess.inbox.put_nowait(message.data)

@@ -1,0 +1,141 @@
+"""One simulated channel shared by separate processes, over UDP on loopback.
+
+A hub owns a :class:`~companion.link.medium.Channel` (loss, corruption, collisions, ...) and
+relays frames between registered nodes in real time (optionally scaled).  Datagrams::
+
+    node -> hub   b"R" node:u16                      register (repeat to keep alive)
+    node -> hub   b"T" node:u16 airtime_us:u32 frame  a transmission starts now
+    hub -> node   b"D" frame                          a reception (after airtime + latency)
+
+The hub checks every datagram strictly (kind, sizes, a registered sender) and drops the rest.
+Run one with ``python -m companion link-hub``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import struct
+from typing import cast
+
+from .airtime import PHY_MAX_FRAME
+from .clock import Clock
+from .medium import Channel, Receiver
+
+_REG = struct.Struct(">cH")
+_TX = struct.Struct(">cHI")
+
+
+class UdpHub(asyncio.DatagramProtocol):
+    """The channel as a UDP service: ``await UdpHub.serve(channel, port=...)``."""
+
+    def __init__(self, channel: Channel, clock: Clock) -> None:
+        self.channel = channel
+        self.clock = clock
+        self.nodes: dict[int, tuple[str, int]] = {}
+        self.dropped = 0
+        self.transport: asyncio.DatagramTransport | None = None
+
+    @classmethod
+    async def serve(
+        cls, channel: Channel, host: str = "127.0.0.1", port: int = 0, clock: Clock | None = None
+    ) -> UdpHub:
+        loop = asyncio.get_running_loop()
+        _, hub = await loop.create_datagram_endpoint(
+            lambda: cls(channel, clock or Clock()), local_addr=(host, port)
+        )
+        return hub
+
+    @property
+    def address(self) -> tuple[str, int]:
+        assert self.transport is not None
+        host, port = self.transport.get_extra_info("sockname")[:2]
+        return host, port
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = cast(asyncio.DatagramTransport, transport)
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        if len(data) == _REG.size and data[:1] == b"R":
+            _, node = _REG.unpack(data)
+            self.nodes[node] = addr  # the latest registration wins (a restarted process)
+            self.channel.nodes.add(node)
+            return
+        elif len(data) > _TX.size and data[:1] == b"T" and len(data) - _TX.size <= PHY_MAX_FRAME:
+            _, node, airtime_us = _TX.unpack_from(data)
+            if self.nodes.get(node) == addr and airtime_us <= 60_000_000:
+                tx = self.channel.begin(node, data[_TX.size :], self.clock.now(), airtime_us / 1e6)
+                self.clock.call_later(airtime_us / 1e6, self._finish, tx)
+                return
+        self.dropped += 1
+
+    def _finish(self, tx: object) -> None:
+        for node, delay, frame in self.channel.end(tx):  # type: ignore[arg-type]
+            addr = self.nodes.get(node)
+            if addr is not None:
+                self.clock.call_later(delay, self._send, b"D" + frame, addr)
+
+    def _send(self, data: bytes, addr: tuple[str, int]) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.sendto(data, addr)
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
+
+
+class UdpTransport(asyncio.DatagramProtocol):
+    """A node's radio on a :class:`UdpHub`: ``await UdpTransport.connect(node, hub_addr)``."""
+
+    def __init__(self, node: int, clock: Clock) -> None:
+        self.node = node
+        self.clock = clock
+        self._receiver: Receiver | None = None
+        self.transport: asyncio.DatagramTransport | None = None
+        self._keepalive: asyncio.Task[None] | None = None
+
+    @classmethod
+    async def connect(
+        cls, node: int, hub: tuple[str, int], clock: Clock | None = None
+    ) -> UdpTransport:
+        loop = asyncio.get_running_loop()
+        _, radio = await loop.create_datagram_endpoint(
+            lambda: cls(node, clock or Clock()), remote_addr=hub
+        )
+        radio._register()
+        radio._keepalive = asyncio.create_task(radio._keep_registered())
+        await asyncio.sleep(0.01)  # let the registration reach the hub first
+        return radio
+
+    def _register(self) -> None:
+        if self.transport is not None:
+            self.transport.sendto(_REG.pack(b"R", self.node))
+
+    async def _keep_registered(self) -> None:
+        while True:
+            await asyncio.sleep(5.0)
+            self._register()
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = cast(asyncio.DatagramTransport, transport)
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        if data[:1] == b"D" and self._receiver is not None:
+            self._receiver(data[1:])
+
+    def set_receiver(self, callback: Receiver) -> None:
+        self._receiver = callback
+
+    async def transmit(self, frame: bytes, airtime: float) -> None:
+        if self.transport is None or self.transport.is_closing():
+            raise ConnectionError("UDP radio is closed")
+        self.transport.sendto(_TX.pack(b"T", self.node, round(airtime * 1e6)) + frame)
+        await self.clock.sleep(airtime)
+
+    async def close(self) -> None:
+        if self._keepalive is not None:
+            self._keepalive.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._keepalive
+        if self.transport is not None:
+            self.transport.close()

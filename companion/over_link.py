@@ -1,0 +1,279 @@
+"""The path comparison through the simulated radio: ``compare --link`` and ``bench link``.
+
+Each case runs Alice and Bob as two link endpoints (nodes 1 and 2) on one simulated channel,
+on a virtual clock: airtime, duty-cycle waits, timeouts and both parties' CPU time pass as link
+time, so hours of regulated airtime take a fraction of a second of real time.  Counts are real
+frames (their encoded bytes on the air); airtime is the Semtech formula for each of them.
+Every case starts with fresh endpoints, as the first exchange of the hour would.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import statistics
+import sys
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from protocol.bench_paths import DEFAULT_DATA, random_path
+from protocol.compare import Case, Party, compare, load_cases
+from protocol.formats import InputFormatError
+from protocol.geometry import path_hits
+from protocol.grid import GridKind, GridSpec
+from protocol.intersection import Alice, Bob, Limits
+from protocol.wire import Suite
+
+from .exchange import RunReport, run_alice, serve_bob
+from .link import (
+    PROFILES,
+    Channel,
+    Clock,
+    Impairments,
+    LinkConfig,
+    LinkEndpoint,
+    LinkProfile,
+    SimMedium,
+    profile,
+    run_simulated,
+)
+from .link.frames import OVERHEAD
+
+ALICE_NODE, BOB_NODE = 1, 2
+
+
+async def _run(
+    case: Case,
+    party: Party,
+    link: LinkProfile,
+    impairments: Impairments,
+    seed: int | None,
+    limits: Limits,
+    config: LinkConfig | None,
+) -> dict[str, Any]:
+    clock = Clock()
+    channel = Channel(impairments, seed)
+    medium = SimMedium(channel, clock)
+    a = LinkEndpoint(ALICE_NODE, medium.attach(ALICE_NODE), link, config, clock)
+    b = LinkEndpoint(BOB_NODE, medium.attach(BOB_NODE), link, config, clock)
+    alice = Alice(case.alice, case.grid, party.alice_keys, limits=limits)
+    bob = Bob(case.bob, party.bob_keys, limits=limits)
+    async with a, b:
+
+        async def bob_side() -> RunReport:
+            peer, session = await b.accept()
+            return await serve_bob(b, peer, session, bob, charge_cpu=True)
+
+        bob_task = asyncio.create_task(bob_side())
+        try:
+            report = await run_alice(a, BOB_NODE, alice, charge_cpu=True)
+        except BaseException:
+            bob_task.cancel()
+            raise
+        bob_report = await bob_task
+    stats = (a.stats, b.stats)
+    return {
+        "hits": report.hits,
+        "plain_hits": path_hits(case.alice, case.bob),
+        "bytes_alice_to_bob": report.bytes_sent,
+        "bytes_bob_to_alice": bob_report.bytes_sent,
+        "messages": report.messages_sent + bob_report.messages_sent,
+        "round_trips": (report.messages_sent + bob_report.messages_sent) / 2,
+        "cpu_s_alice": report.cpu_s,
+        "cpu_s_bob": bob_report.cpu_s,
+        "frames_sent": sum(s.frames_sent for s in stats),
+        "frames_retransmitted": sum(s.frames_retransmitted for s in stats),
+        "polls": sum(s.polls_sent for s in stats),
+        "bytes_on_air": sum(s.bytes_sent for s in stats),
+        "airtime_s": sum(s.airtime_s for s in stats),
+        "duty_wait_s": sum(s.duty_wait_s for s in stats),
+        "wall_s_simulated": report.wall_s,
+        "frames_dropped": _merge(a.stats.dropped, b.stats.dropped),
+        "channel": asdict(channel.stats),
+    }
+
+
+def _merge(*counters: dict[str, int]) -> dict[str, int]:
+    merged: dict[str, int] = {}
+    for counter in counters:
+        for key, value in counter.items():
+            merged[key] = merged.get(key, 0) + value
+    return merged
+
+
+def link_case(
+    case: Case,
+    party: Party,
+    link: LinkProfile,
+    impairments: Impairments | None = None,
+    seed: int | None = None,
+    limits: Limits | None = None,
+    config: LinkConfig | None = None,
+) -> dict[str, Any]:
+    """One comparison through the simulated link (virtual time)."""
+    return run_simulated(
+        _run(case, party, link, impairments or Impairments(), seed, limits or Limits(), config)
+    )
+
+
+# ---------------------------------------------------------------------------- bench link
+
+LOSSES = (0.0, 0.1, 0.3)
+
+
+def _say(progress: bool, message: str) -> None:
+    if progress:
+        print(f"  ... {message}", file=sys.stderr, flush=True)
+
+
+def _row(
+    profile_name: str, loss: float, workload: str, runs: list[dict[str, Any]]
+) -> dict[str, Any]:
+    def med(key: str) -> float:
+        return float(statistics.median(r[key] for r in runs))
+
+    return {
+        "profile": profile_name,
+        "loss": loss,
+        "workload": workload,
+        "runs": len(runs),
+        "correct": sum(r["hits"] == r["plain_hits"] for r in runs),
+        "frames_sent": med("frames_sent"),
+        "frames_retransmitted": med("frames_retransmitted"),
+        "bytes_on_air": med("bytes_on_air"),
+        "airtime_s": med("airtime_s"),
+        "wall_s_simulated": med("wall_s_simulated"),
+        "cpu_s": med("cpu_s_alice") + med("cpu_s_bob"),
+    }
+
+
+def bench_link(
+    data: Path = DEFAULT_DATA,
+    profiles: Sequence[str] | None = None,
+    losses: Sequence[float] = LOSSES,
+    suite: str = "compact",
+    size: int = 8,
+    range_: int = 99,
+    seed: int = 1,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """The paper's 30 pairs and one size x size random case over each profile and loss."""
+    if not (data / "alices_segments.txt").exists():
+        raise InputFormatError(f"no benchmark data in {data} (use --data DIR)")
+    profiles = list(profiles or PROFILES)
+    for name in profiles:
+        profile(name)  # unknown names fail before any work
+    _say(progress, f"generating keys ({suite})")
+    party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
+    pairs = load_cases(data / "alices_segments.txt", data / "bobs_segments.txt")
+    grid = GridSpec(GridKind.PLANE, range_)
+    paths = Case(random_path(size, range_), random_path(size, range_), grid)
+    rows = []
+    for name in profiles:
+        link = PROFILES[name]
+        for loss in losses:
+            imp = Impairments(loss=loss)
+            _say(progress, f"{name}, loss {loss:.0%}: paper pairs")
+            runs = [link_case(c, party, link, imp, seed + k) for k, c in enumerate(pairs)]
+            rows.append(_row(name, loss, "paper pair", runs))
+            _say(progress, f"{name}, loss {loss:.0%}: {size} x {size} paths")
+            rows.append(
+                _row(name, loss, f"{size}x{size}", [link_case(paths, party, link, imp, seed)])
+            )
+    return {
+        "suite": suite,
+        "profiles": {
+            n: {
+                "description": PROFILES[n].description,
+                "frame_bytes": PROFILES[n].max_frame,
+                "payload_bytes": PROFILES[n].max_frame - OVERHEAD,
+                "frame_airtime_s": PROFILES[n].airtime(PROFILES[n].max_frame),
+                "header_share_of_airtime": header_share(PROFILES[n]),
+                "duty_cycle": PROFILES[n].duty_cycle,
+                "dwell_s": PROFILES[n].dwell_s,
+            }
+            for n in profiles
+        },
+        "grid_range": range_,
+        "rows": rows,
+    }
+
+
+def header_share(link: LinkProfile) -> float:
+    """Share of a full frame's airtime spent on the link header and CRC."""
+    full = link.airtime(link.max_frame)
+    return (full - link.airtime(link.max_frame - OVERHEAD)) / full
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.1f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def format_link(result: dict[str, Any]) -> str:
+    lines = [
+        f"Link benchmark, suite {result['suite']}: medians per run; a paper pair is one "
+        f"1 x 1 comparison (keys included), {result['rows'][1]['workload']} one run "
+        f"(range +-{result['grid_range']}).",
+        "",
+        "| profile | frame B | header share of airtime | duty cycle | dwell |",
+        "|---|---:|---:|---|---|",
+    ]
+    for name, p in result["profiles"].items():
+        duty = f"{p['duty_cycle']:.0%}" if p["duty_cycle"] else "none"
+        dwell = f"{p['dwell_s'] * 1000:.0f} ms" if p["dwell_s"] else "none"
+        share = p["header_share_of_airtime"]
+        lines.append(f"| {name} | {p['frame_bytes']} | {share:.1%} | {duty} | {dwell} |")
+    lines += [
+        "",
+        "| profile | loss | workload | correct | frames | retransmitted | frames vs 0 % "
+        "| airtime | simulated time |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    base: dict[tuple[str, str], float] = {}
+    for r in result["rows"]:
+        key = (r["profile"], r["workload"])
+        if r["loss"] == 0:
+            base[key] = r["frames_sent"]
+        ratio = r["frames_sent"] / base[key] if key in base else float("nan")
+        lines.append(
+            f"| {r['profile']} | {r['loss']:.0%} | {r['workload']} | {r['correct']}/{r['runs']} "
+            f"| {r['frames_sent']:.0f} | {r['frames_retransmitted']:.0f} | {ratio:.2f}x "
+            f"| {_duration(r['airtime_s'])} | {_duration(r['wall_s_simulated'])} |"
+        )
+    return "\n".join(lines)
+
+
+def compare_over_link(
+    alice_file: str | Path,
+    bob_file: str | Path,
+    suite_name: str,
+    link: LinkProfile,
+    impairments: Impairments,
+    seed: int | None,
+    *,
+    range_: int | None = None,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """``compare --link``: the plain comparison's JSON plus the link's counters per case."""
+    seeds = itertools.count(1)
+
+    def over_link(case: Case, party: Party) -> dict[str, Any]:
+        number = next(seeds)
+        return link_case(case, party, link, impairments, None if seed is None else seed + number)
+
+    result = compare(
+        alice_file, bob_file, suite_name, range_=range_, progress=progress, run=over_link
+    )
+    result["link"] = {
+        "profile": link.name,
+        **asdict(impairments),
+        "seed": seed,
+        "frame_bytes": link.max_frame,
+    }
+    return result

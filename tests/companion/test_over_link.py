@@ -1,0 +1,68 @@
+"""``python -m protocol compare --link`` and ``bench link`` as a user runs them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from companion.over_link import bench_link, format_link
+from protocol.bench_paths import DEFAULT_DATA
+
+from ..protocol.test_cli import run_cli
+
+
+def test_compare_over_a_lossy_link_json(tmp_path: Path) -> None:
+    alice, bob = tmp_path / "alice.txt", tmp_path / "bob.txt"
+    alice.write_text("(0,0)(10,10)\n(0,0)(5,0)(5,5)\n")
+    bob.write_text("(0,10)(10,0)\n(5,0)(9,0)\n")
+    result = run_cli(
+        "compare",
+        str(alice),
+        str(bob),
+        "--link",
+        "eu868-sf9",
+        "--loss",
+        "0.3",
+        "--seed",
+        "7",
+        "--json",
+    )
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert out["link"]["profile"] == "eu868-sf9" and out["link"]["loss"] == 0.3
+    for case in out["cases"]:
+        assert case["hits"] == case["plain_hits"]
+        assert case["frames_sent"] > case["frames_retransmitted"] > 0
+        assert case["airtime_s"] > 0
+        # ~10 KB at SF9 (~1.8 kbit/s) needs more than the 32 s of data budget an hour allows
+        assert case["wall_s_simulated"] > case["airtime_s"]
+
+
+def test_compare_table_and_bad_profile(tmp_path: Path) -> None:
+    alice, bob = tmp_path / "alice.txt", tmp_path / "bob.txt"
+    alice.write_text("(0,0)(10,10)\n")
+    bob.write_text("(0,10)(10,0)\n")
+    result = run_cli("compare", str(alice), str(bob), "--link", "ideal")
+    assert result.returncode == 0, result.stderr
+    assert "link ideal (255-byte frames)" in result.stdout
+    bad = run_cli("compare", str(alice), str(bob), "--link", "eu433")
+    assert bad.returncode == 2 and "unknown link profile" in bad.stderr
+    worse = run_cli("compare", str(alice), str(bob), "--link", "ideal", "--loss", "1.5")
+    assert worse.returncode == 2 and "outside [0, 1)" in worse.stderr
+
+
+@pytest.mark.slow
+def test_bench_link_rows() -> None:
+    result = bench_link(DEFAULT_DATA, ["ideal", "us915-sf9"], (0.0, 0.3), size=2, progress=False)
+    rows = result["rows"]
+    assert len(rows) == 2 * 2 * 2
+    for row in rows:
+        assert row["correct"] == row["runs"]
+        assert row["frames_sent"] > 0 and row["airtime_s"] > 0
+    paper = {(r["profile"], r["loss"]): r for r in rows if r["workload"] == "paper pair"}
+    assert paper[("us915-sf9", 0.3)]["frames_sent"] > paper[("us915-sf9", 0.0)]["frames_sent"]
+    assert paper[("us915-sf9", 0.0)]["frames_retransmitted"] == 0
+    table = format_link(result)
+    assert "| us915-sf9 | 30% | paper pair | 30/30 |" in table
