@@ -13,7 +13,12 @@ from .errors import ProtocolError
 def _demo(_args: argparse.Namespace) -> int:
     from .demo import run_demo
 
-    return run_demo()
+    code = run_demo()
+    if code == 0:
+        from companion.over_link import radio_demo  # the radio is the companion's (I/O) side
+
+        code = radio_demo()
+    return code
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -25,10 +30,10 @@ def _compare(args: argparse.Namespace) -> int:
         from companion.over_link import compare_over_link
 
         try:
-            link, impairments = (
-                profile(args.link),
-                Impairments(loss=args.loss, corrupt=args.corrupt),
-            )
+            link = profile(args.link)
+            if args.mtu is not None:
+                link = link.with_mtu(args.mtu)
+            impairments = Impairments(loss=args.loss, corrupt=args.corrupt)
         except ValueError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -108,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
         "--corrupt", type=float, default=0.0, help="frame corruption probability (--link)"
     )
     compare.add_argument("--seed", type=int, default=None, help="channel seed (--link)")
+    compare.add_argument(
+        "--mtu", type=int, default=None, help="radio frame size in bytes, 32..255 (--link)"
+    )
     compare.set_defaults(func=_compare)
 
     bench = sub.add_parser("bench", help="benchmarks that print tables")

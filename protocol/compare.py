@@ -28,9 +28,24 @@ SUITES = {"compact": Suite.COMPACT, "paper": Suite.PAPER}
 
 @dataclass(frozen=True)
 class Case:
+    """One comparison.  With ``bob_geographic`` Bob's path is WGS84 (degE7) and Bob projects
+    it himself on the grid Alice's hello announces, as a drone does."""
+
     alice: tuple[Point, ...]
     bob: tuple[Point, ...]
     grid: GridSpec
+    bob_geographic: bool = False
+
+    @property
+    def bob_on_grid(self) -> tuple[Point, ...]:
+        return self.grid.project_path(self.bob) if self.bob_geographic else self.bob
+
+    def machines(self, party: Party, limits: Limits | None = None) -> tuple[Alice, Bob]:
+        limits = limits or Limits()
+        return (
+            Alice(self.alice, self.grid, party.alice_keys, limits=limits),
+            Bob(self.bob, party.bob_keys, geographic=self.bob_geographic, limits=limits),
+        )
 
 
 def _is_plan(path: str | Path, text: str) -> bool:
@@ -57,7 +72,7 @@ def load_cases(
             grid = GridSpec(GridKind.GEO, range_, lat, lon, resolution_mm)
         else:
             grid = GridSpec.geo(lat, lon, resolution_mm=resolution_mm, radius_m=radius_m)
-        return [Case(grid.project_path(a_geo), grid.project_path(b_geo), grid)]
+        return [Case(grid.project_path(a_geo), tuple(b_geo), grid, bob_geographic=True)]
     a_cases = parse_paper_text(a_text, str(alice_file))
     b_cases = parse_paper_text(b_text, str(bob_file))
     if len(a_cases) != len(b_cases):
@@ -96,13 +111,11 @@ class Party:
 
 
 def run_case(case: Case, party: Party, limits: Limits | None = None) -> dict[str, Any]:
-    limits = limits or Limits()
-    alice = Alice(case.alice, case.grid, party.alice_keys, limits=limits)
-    bob = Bob(case.bob, party.bob_keys, limits=limits)
+    alice, bob = case.machines(party, limits)
     t = run_paths(alice, bob)
     return {
         "hits": alice.hits,
-        "plain_hits": path_hits(case.alice, case.bob),
+        "plain_hits": path_hits(case.alice, case.bob_on_grid),
         "bytes_alice_to_bob": t.bytes_alice_to_bob,
         "bytes_bob_to_alice": t.bytes_bob_to_alice,
         "messages": t.messages,

@@ -30,6 +30,7 @@ from .frames import (
     BROADCAST,
     MAX_ACK_BITMAP,
     OVERHEAD,
+    Flag,
     Frame,
     FrameError,
     FrameType,
@@ -148,6 +149,7 @@ class LinkEndpoint:
         self._wake = asyncio.Event()
         self._sessions: dict[tuple[int, int], _Session] = {}
         self._closed: dict[tuple[int, int], float] = {}
+        self._aborted: dict[tuple[int, int], Frame] = {}
         self._accept: asyncio.Queue[tuple[int, int]] = asyncio.Queue()
         self._outgoing: dict[tuple[int, int, int], tuple[Outgoing, asyncio.Event]] = {}
         self._heard: dict[int, float] = {}
@@ -194,6 +196,7 @@ class LinkEndpoint:
         while session is None or (peer, session) in self._sessions:
             session = secrets.randbelow(0xFFFF) + 1
         self._closed.pop((peer, session), None)
+        self._aborted.pop((peer, session), None)
         self._sessions[(peer, session)] = _Session(peer, session, self.clock.now())
         return session
 
@@ -209,11 +212,13 @@ class LinkEndpoint:
         self.receiver.forget_session(peer, session)
 
     def abort(self, peer: int, session: int, code: int, text: str = "") -> None:
-        """Tell the peer the session is over (best effort, twice) and close it here."""
+        """Tell the peer the session is over (three copies, and again whenever it asks for an
+        ACK in this session) and close it here."""
         frame = Frame(FrameType.ABORT, self.node, peer, session, payload=abort_payload(code, text))
-        for _ in range(2 if self._running else 0):
+        for _ in range(3 if self._running else 0):
             self._enqueue(frame, control=True)
         self.close_session(peer, session)
+        self._aborted[(peer, session)] = frame  # repeated to whoever still asks (like a RST)
 
     def _session(self, peer: int, session: int) -> _Session:
         try:
@@ -380,6 +385,7 @@ class LinkEndpoint:
             self.receiver.expire(now)
             for key in [k for k, t in self._closed.items() if now - t > self.idle_timeout]:
                 del self._closed[key]
+                self._aborted.pop(key, None)
 
     def _on_bytes(self, data: bytes) -> None:
         try:
@@ -396,7 +402,10 @@ class LinkEndpoint:
         sess = self._sessions.get(key)
         if sess is not None:
             sess.last_heard = now
-        if frame.type in (FrameType.DATA, FrameType.POLL):
+        if frame.type in (FrameType.DATA, FrameType.POLL) and key in self._aborted:
+            if frame.type is FrameType.POLL or frame.flags & Flag.ACK_REQ:
+                self._enqueue(self._aborted[key], control=True)
+        elif frame.type in (FrameType.DATA, FrameType.POLL):
             delivered, ack = self.receiver.on_frame(frame, now)
             if ack is not None:
                 self._enqueue(ack, control=True)

@@ -54,3 +54,45 @@ def test_demo_runs_and_agrees_with_the_plaintext() -> None:
     result = run_cli("demo")
     assert result.returncode == 0, result.stderr
     assert "CROSSES" in result.stdout and "Bob learns nothing." in result.stdout
+
+
+def test_compare_on_qgc_plans(tmp_path: Path) -> None:
+    """Two .plan missions: Alice's grid at her home, Bob projects his own waypoints."""
+
+    def plan(points: list[tuple[float, float]]) -> str:
+        items = [
+            {
+                "type": "SimpleItem",
+                "command": 16,
+                "frame": 3,
+                "params": [0, 0, 0, None, lat, lon, 30],
+                "doJumpId": i + 1,
+            }
+            for i, (lat, lon) in enumerate(points)
+        ]
+        return json.dumps(
+            {
+                "fileType": "Plan",
+                "version": 1,
+                "groundStation": "QGroundControl",
+                "mission": {
+                    "version": 2,
+                    "items": items,
+                    "plannedHomePosition": [*points[0], 0],
+                    "firmwareType": 12,
+                    "vehicleType": 2,
+                    "cruiseSpeed": 15,
+                    "hoverSpeed": 5,
+                },
+                "geoFence": {"circles": [], "polygons": [], "version": 2},
+                "rallyPoints": {"points": [], "version": 2},
+            }
+        )
+
+    alice, bob = tmp_path / "alice.plan", tmp_path / "bob.plan"
+    alice.write_text(plan([(47.3977, 8.5456), (47.3977, 8.5500), (47.3990, 8.5500)]))
+    bob.write_text(plan([(47.3960, 8.5480), (47.3995, 8.5480)]))
+    result = run_cli("compare", str(alice), str(bob), "--json")
+    assert result.returncode == 0, result.stderr
+    (case,) = json.loads(result.stdout)["cases"]
+    assert case["hits"] == case["plain_hits"] == [True, False]

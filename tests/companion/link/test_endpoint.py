@@ -231,3 +231,19 @@ def test_three_nodes_share_one_channel_with_collisions() -> None:
             await node.close()
 
     run_simulated(main())
+
+
+def test_an_aborted_session_answers_late_requests_with_abort() -> None:
+    """Even if every ABORT copy is lost, the peer's next ACK request is answered by one."""
+
+    async def main() -> None:
+        async with pair(PROFILES["ideal"]) as p:
+            session = p.a.open(2)
+            await p.a.send(2, session, b"hello")
+            peer, sess = await p.b.accept()
+            p.b.abort(peer, sess, ABORT_PROTOCOL, "bad message")
+            p.b._control.clear()  # the three copies never make it to the air
+            with pytest.raises(PeerAborted, match="bad message"):
+                await p.a.send(2, session, b"more")
+
+    run_simulated(main())
