@@ -1,4 +1,4 @@
-"""Command line: ``python -m companion link-hub`` (more commands come with the companion)."""
+"""Command line: ``python -m companion {link-hub, mock-autopilot, mission show}``."""
 
 from __future__ import annotations
 
@@ -10,6 +10,15 @@ import sys
 
 from .link import Channel, Clock, Impairments
 from .link.udp import UdpHub
+
+
+async def _until_signalled() -> None:
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError):
+            loop.add_signal_handler(sig, stop.set)
+    await stop.wait()
 
 
 async def _hub(args: argparse.Namespace) -> int:
@@ -24,14 +33,81 @@ async def _hub(args: argparse.Namespace) -> int:
     hub = await UdpHub.serve(channel, args.host, args.port, Clock(args.time_scale))
     host, port = hub.address
     print(f"link hub on udp://{host}:{port} ({impairments})", flush=True)
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        with contextlib.suppress(NotImplementedError):
-            loop.add_signal_handler(sig, stop.set)
-    await stop.wait()
+    await _until_signalled()
     hub.close()
     print(f"hub stopped: {channel.stats}", flush=True)
+    return 0
+
+
+async def _mock(args: argparse.Namespace) -> int:
+    from .missionfile import read_mission
+    from .mock_autopilot import Faults, FlightModel, MockAutopilot
+
+    mission = read_mission(args.mission) if args.mission else []
+    faults = Faults(
+        drop_every=args.drop_every,
+        latency_s=args.latency,
+        ignore=frozenset(args.ignore or ()),
+        reject_upload=args.reject_upload,
+        vanish_after_s=args.vanish_after,
+    )
+    flight = FlightModel(cruise_m_s=args.speed, time_scale=args.time_scale)
+    mock = MockAutopilot(
+        args.instance,
+        mission=mission,
+        ardupilot=args.ardupilot,
+        faults=faults,
+        flight=flight,
+        home=(args.home_lat, args.home_lon, args.home_alt),
+    )
+    async with mock:
+        kind = "ArduPilot" if args.ardupilot else "PX4"
+        print(
+            f"mock {kind} autopilot, system {mock.sysid}: listening on udp {mock.host}:"
+            f"{mock.bind_port}, sending to {mock.send_port} ({len(mission)} mission items)",
+            flush=True,
+        )
+        await _until_signalled()
+    if args.trajectory:
+        with open(args.trajectory, "w", encoding="utf-8") as handle:
+            handle.write("t_s,lat,lon,alt_m\n")
+            for t, lat, lon, alt in mock.trajectory:
+                handle.write(f"{t:.2f},{lat:.7f},{lon:.7f},{alt:.2f}\n")
+    return 0
+
+
+def _mission_show(args: argparse.Namespace) -> int:
+    from .mission import segments, vertices
+    from .missionfile import read_mission
+
+    items = read_mission(args.file)
+    names = {
+        16: "WAYPOINT",
+        17: "LOITER_UNLIM",
+        18: "LOITER_TURNS",
+        19: "LOITER_TIME",
+        20: "RETURN_TO_LAUNCH",
+        21: "LAND",
+        22: "TAKEOFF",
+        31: "LOITER_TO_ALT",
+        82: "SPLINE_WAYPOINT",
+        178: "DO_CHANGE_SPEED",
+        183: "DO_SET_SERVO",
+        206: "DO_SET_CAM_TRIGG_DIST",
+        177: "DO_JUMP",
+    }
+    v = set(vertices(items, ardupilot=args.ardupilot))
+    print("| seq | command | frame | lat | lon | alt m | vertex |")
+    print("|---:|---|---:|---:|---:|---:|---|")
+    for it in items:
+        name = names.get(it.command, str(it.command))
+        print(
+            f"| {it.seq} | {name} | {it.frame} | {it.x / 1e7:.7f} | {it.y / 1e7:.7f} "
+            f"| {it.z:.1f} | {'yes' if it.seq in v else ''} |"
+        )
+    print("\nSegments (what the protocol compares):")
+    for k, (a, b) in enumerate(segments(items, ardupilot=args.ardupilot)):
+        print(f"  segment {k}: item {a} -> item {b}")
     return 0
 
 
@@ -49,10 +125,37 @@ def main(argv: list[str] | None = None) -> int:
     hub.add_argument("--seed", type=int, default=None)
     hub.add_argument("--time-scale", type=float, default=1.0)
     hub.add_argument("--no-collisions", action="store_true")
+
+    mock = sub.add_parser("mock-autopilot", help="a MAVLink autopilot for tests and replays")
+    mock.add_argument("--mission", help=".plan or QGC WPL 110 file to start with")
+    mock.add_argument("--instance", type=int, default=0, help="binds 14580+I, sends to 14540+I")
+    mock.add_argument("--ardupilot", action="store_true", help="ArduPilot personality")
+    mock.add_argument("--home-lat", type=float, default=47.397742)
+    mock.add_argument("--home-lon", type=float, default=8.545594)
+    mock.add_argument("--home-alt", type=float, default=488.0)
+    mock.add_argument("--speed", type=float, default=10.0, help="cruise m/s")
+    mock.add_argument("--time-scale", type=float, default=1.0)
+    mock.add_argument("--drop-every", type=int, default=0, help="drop every k-th mission reply")
+    mock.add_argument("--latency", type=float, default=0.0, help="seconds added to replies")
+    mock.add_argument("--ignore", action="append", help="MAVLink message name to ignore")
+    mock.add_argument("--reject-upload", type=int, default=None, help="MAV_MISSION_RESULT")
+    mock.add_argument("--vanish-after", type=float, default=None, help="seconds")
+    mock.add_argument("--trajectory", help="write the flown trajectory (CSV) on exit")
+
+    mission = sub.add_parser("mission", help="mission files")
+    mission_sub = mission.add_subparsers(dest="action", required=True)
+    show = mission_sub.add_parser("show", help="print a mission and its segments")
+    show.add_argument("file")
+    show.add_argument("--ardupilot", action="store_true", help="item 0 is home")
+
     args = parser.parse_args(argv)
     try:
-        return asyncio.run(_hub(args))
-    except ValueError as exc:
+        if args.command == "link-hub":
+            return asyncio.run(_hub(args))
+        if args.command == "mock-autopilot":
+            return asyncio.run(_mock(args))
+        return _mission_show(args)
+    except (ValueError, OSError) as exc:  # MissionError is a ValueError
         print(f"error: {exc}", file=sys.stderr)
         return 2
 

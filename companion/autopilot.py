@@ -1,0 +1,175 @@
+"""Mission I/O with the vehicle through MAVSDK 4.1 (native asyncio API, ``mission_raw``).
+
+Connect, download and normalise, upload and verify.  The one promise: after
+:meth:`Autopilot.replace_mission` the vehicle holds either the new mission or the old one,
+never a mix -- the upload is read back and compared item by item, and on any failure the
+original is uploaded again (and read back) before the error is raised.  Every call is bounded
+by a timeout; a silent or vanished autopilot is an :class:`AutopilotError`, never a hang.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from .mission import MissionError, MissionItem, normalise
+
+log = logging.getLogger(__name__)
+
+
+class AutopilotError(Exception):
+    """The autopilot did not do what was asked (timeout, refusal, mismatch)."""
+
+
+class RolledBack(AutopilotError):
+    """The edit failed; the vehicle was verified to hold its previous mission again."""
+
+
+@dataclass(frozen=True, slots=True)
+class Timeouts:
+    connect_s: float = 10.0
+    transfer_s: float = 30.0  # one download or upload (MAVSDK retries inside)
+    retries: int = 2  # extra attempts of a failed transfer
+
+
+def to_mavsdk(item: MissionItem) -> Any:
+    from mavsdk.asyncio.plugins.mission_raw import MissionItem as RawItem
+
+    return RawItem(
+        item.seq,
+        item.frame,
+        item.command,
+        item.current,
+        item.autocontinue,
+        item.param1,
+        item.param2,
+        item.param3,
+        item.param4,
+        item.x,
+        item.y,
+        item.z,
+        item.mission_type,
+    )
+
+
+def from_mavsdk(raw: Any) -> MissionItem:
+    item = MissionItem(
+        int(raw.seq),
+        int(raw.frame),
+        int(raw.command),
+        int(raw.current),
+        int(raw.autocontinue),
+        float(raw.param1),
+        float(raw.param2),
+        float(raw.param3),
+        float(raw.param4),
+        int(raw.x),
+        int(raw.y),
+        float(raw.z),
+        int(raw.mission_type),
+    )
+    item.check()
+    return item
+
+
+class Autopilot:
+    """One vehicle: ``async with Autopilot.connect("udpin://0.0.0.0:14540") as ap: ...``."""
+
+    def __init__(self, mavsdk: Any, system: Any, timeouts: Timeouts) -> None:
+        from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
+
+        self._mavsdk = mavsdk
+        self.system = system
+        self.timeouts = timeouts
+        self.mission_raw = MissionRawAsync(system)
+
+    @classmethod
+    async def connect(cls, url: str, timeouts: Timeouts | None = None) -> Autopilot:
+        from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+
+        timeouts = timeouts or Timeouts()
+        config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
+        mavsdk = Mavsdk(config)
+        await mavsdk.__aenter__()
+        try:
+            await mavsdk.add_any_connection(url)
+            system = await mavsdk.first_autopilot(timeout_s=timeouts.connect_s)
+        except BaseException:
+            await mavsdk.__aexit__(None, None, None)
+            raise
+        if system is None:
+            await mavsdk.__aexit__(None, None, None)
+            raise AutopilotError(f"no autopilot heard on {url} within {timeouts.connect_s} s")
+        return cls(mavsdk, system, timeouts)
+
+    async def close(self) -> None:
+        self.mission_raw.destroy()
+        await self._mavsdk.__aexit__(None, None, None)
+
+    async def __aenter__(self) -> Autopilot:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def _call(self, what: str, call: Any) -> Any:
+        from mavsdk.asyncio.plugins.mission_raw import MissionRawError
+
+        last: Exception | None = None
+        for attempt in range(1 + self.timeouts.retries):
+            try:
+                return await asyncio.wait_for(call(), self.timeouts.transfer_s)
+            except (MissionRawError, TimeoutError) as exc:
+                last = exc
+                log.warning("%s failed (attempt %d): %s", what, attempt + 1, exc)
+        raise AutopilotError(f"{what} failed: {last}") from last
+
+    async def download(self) -> list[MissionItem]:
+        """The vehicle's mission, normalised (seq 0..n-1, one current item)."""
+        raw = await self._call("mission download", self.mission_raw.download_mission)
+        try:
+            return normalise([from_mavsdk(r) for r in raw]) if raw else []
+        except MissionError as exc:
+            raise AutopilotError(f"the vehicle holds an invalid mission: {exc}") from exc
+
+    async def _upload(self, items: Sequence[MissionItem]) -> None:
+        raw = [to_mavsdk(i) for i in items]
+        await self._call("mission upload", lambda: self.mission_raw.upload_mission(raw))
+
+    async def _verify(self, items: Sequence[MissionItem]) -> bool:
+        held = await self.download()
+        sent = normalise(items)
+        return len(held) == len(sent) and all(
+            a.replace(current=0).same_as(b.replace(current=0))
+            for a, b in zip(held, sent, strict=True)
+        )
+
+    async def replace_mission(
+        self, new: Sequence[MissionItem], original: Sequence[MissionItem]
+    ) -> None:
+        """Upload ``new`` and verify it; on failure restore and verify ``original``."""
+        new = normalise(new)
+        if not new:
+            raise MissionError("refusing to upload an empty mission")
+        try:
+            await self._upload(new)
+            if await self._verify(new):
+                return
+            problem: Exception = AutopilotError("read-back differs from the upload")
+        except AutopilotError as exc:
+            problem = exc
+        log.warning("mission edit failed (%s); restoring the original", problem)
+        try:
+            await self._upload(original)
+            restored = await self._verify(original)
+        except AutopilotError as exc:
+            raise AutopilotError(
+                f"edit failed ({problem}) and restoring the original failed too ({exc}); "
+                "the vehicle's mission is unknown"
+            ) from exc
+        if not restored:
+            raise AutopilotError(f"edit failed ({problem}); the restored mission differs")
+        raise RolledBack(f"edit failed ({problem}); the vehicle holds its previous mission")

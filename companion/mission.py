@@ -1,0 +1,172 @@
+"""Mission items as the autopilot holds them (MAVLink MISSION_ITEM_INT), pure.
+
+The protocol compares *segments*: the legs between consecutive positional NAV items -- items
+whose command flies to or acts at a position (waypoint, loiter, land, spline, VTOL land,
+takeoff with a position) in a global frame.  Items without a position (speed changes, servo,
+camera, RTL, jumps) are not vertices and are never changed; ArduPilot's home (item 0) is never
+a vertex.  So segment i of the protocol is segment i of :func:`vertices`, and the planner edits
+exactly those items.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import struct
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+# MAV_CMD values of NAV items that carry a position
+NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TURNS, NAV_LOITER_TIME = 16, 17, 18, 19
+NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, NAV_LOITER_TO_ALT = 20, 21, 22, 31
+NAV_SPLINE_WAYPOINT, NAV_VTOL_TAKEOFF, NAV_VTOL_LAND = 82, 84, 85
+POSITIONAL_NAV = frozenset(
+    {
+        NAV_WAYPOINT,
+        NAV_LOITER_UNLIM,
+        NAV_LOITER_TURNS,
+        NAV_LOITER_TIME,
+        NAV_LAND,
+        NAV_TAKEOFF,
+        NAV_LOITER_TO_ALT,
+        NAV_SPLINE_WAYPOINT,
+        NAV_VTOL_TAKEOFF,
+        NAV_VTOL_LAND,
+    }
+)
+# MAV_FRAME: altitude reference of global frames
+FRAMES_AMSL = frozenset({0, 5})  # GLOBAL, GLOBAL_INT
+FRAMES_RELATIVE = frozenset({3, 6})  # GLOBAL_RELATIVE_ALT(_INT)
+FRAMES_TERRAIN = frozenset({10, 11})  # GLOBAL_TERRAIN_ALT(_INT)
+FRAMES_GLOBAL = FRAMES_AMSL | FRAMES_RELATIVE | FRAMES_TERRAIN
+FRAME_MISSION = 2
+KNOWN_FRAMES = FRAMES_GLOBAL | {1, 2, 4, 7, 8, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21}
+MISSION_TYPES = {0: "mission", 1: "fence", 2: "rally"}
+
+
+class MissionError(ValueError):
+    """A mission (from a file or from the autopilot) is invalid; says which item and why."""
+
+
+@dataclass(frozen=True, slots=True)
+class MissionItem:
+    """One MISSION_ITEM_INT: x/y are degE7 in global frames, z metres in the item's frame."""
+
+    seq: int
+    frame: int
+    command: int
+    current: int
+    autocontinue: int
+    param1: float
+    param2: float
+    param3: float
+    param4: float
+    x: int
+    y: int
+    z: float
+    mission_type: int = 0
+
+    @property
+    def has_position(self) -> bool:
+        return (
+            self.command in POSITIONAL_NAV
+            and self.frame in FRAMES_GLOBAL
+            and not (self.x == 0 and self.y == 0)
+        )
+
+    def check(self) -> None:
+        """Bounds and sizes of every field (items arrive from files and from the vehicle)."""
+        where = f"item {self.seq}"
+        if not 0 <= self.seq <= 0xFFFF or not 0 <= self.command <= 0xFFFF:
+            raise MissionError(f"{where}: seq/command out of range")
+        if self.frame not in KNOWN_FRAMES:
+            raise MissionError(f"{where}: unknown frame {self.frame}")
+        if self.current not in (0, 1) or self.autocontinue not in (0, 1):
+            raise MissionError(f"{where}: current/autocontinue must be 0 or 1")
+        if self.mission_type not in MISSION_TYPES:
+            raise MissionError(f"{where}: unknown mission type {self.mission_type}")
+        if not -(2**31) <= self.x < 2**31 or not -(2**31) <= self.y < 2**31:
+            raise MissionError(f"{where}: x/y outside int32")
+        if self.frame in FRAMES_GLOBAL and (
+            abs(self.x) > 900_000_000 or abs(self.y) > 1_800_000_000
+        ):
+            raise MissionError(f"{where}: latitude/longitude out of range")
+        if not math.isfinite(self.z):
+            raise MissionError(f"{where}: altitude is not a number")
+        for name in ("param1", "param2", "param3"):
+            if math.isinf(getattr(self, name)):
+                raise MissionError(f"{where}: {name} is infinite")
+
+    def replace(self, **changes: Any) -> MissionItem:
+        return replace(self, **changes)
+
+    def same_as(self, other: MissionItem) -> bool:
+        """Equal as the vehicle stores them (float32 params, NaN equal to NaN)."""
+
+        def f32(v: float) -> float:
+            return float(struct.unpack("<f", struct.pack("<f", v))[0])
+
+        def eq(a: float, b: float) -> bool:
+            return (math.isnan(a) and math.isnan(b)) or f32(a) == f32(b)
+
+        return (
+            self.seq,
+            self.frame,
+            self.command,
+            self.current,
+            self.autocontinue,
+            self.x,
+            self.y,
+            self.mission_type,
+        ) == (
+            other.seq,
+            other.frame,
+            other.command,
+            other.current,
+            other.autocontinue,
+            other.x,
+            other.y,
+            other.mission_type,
+        ) and all(
+            eq(getattr(self, n), getattr(other, n))
+            for n in ("param1", "param2", "param3", "param4", "z")
+        )
+
+
+def normalise(items: Sequence[MissionItem]) -> list[MissionItem]:
+    """Sequence numbers 0..n-1 and exactly one current item (the first marked, else 0)."""
+    marked = [i for i, item in enumerate(items) if item.current]
+    current = marked[0] if marked else 0
+    out = [item.replace(seq=i, current=int(i == current)) for i, item in enumerate(items)]
+    for item in out:
+        item.check()
+    return out
+
+
+def vertices(items: Sequence[MissionItem], *, ardupilot: bool = False) -> list[int]:
+    """Indices of the items that are path vertices (ArduPilot's home item 0 excluded)."""
+    start = 1 if ardupilot else 0
+    return [i for i in range(start, len(items)) if items[i].has_position]
+
+
+def path_of(items: Sequence[MissionItem], *, ardupilot: bool = False) -> list[tuple[int, int]]:
+    """The mission's ground track as (lat, lon) degE7 vertices."""
+    return [(items[i].x, items[i].y) for i in vertices(items, ardupilot=ardupilot)]
+
+
+def segments(items: Sequence[MissionItem], *, ardupilot: bool = False) -> list[tuple[int, int]]:
+    """Segment k as the pair of item indices it joins."""
+    v = vertices(items, ardupilot=ardupilot)
+    return list(itertools.pairwise(v))
+
+
+def remaining(items: Sequence[MissionItem], current: int, *, ardupilot: bool = False) -> int:
+    """Index of the first segment still to fly when item ``current`` is the active one."""
+    v = vertices(items, ardupilot=ardupilot)
+    ahead = [k for k, index in enumerate(v) if index >= current]
+    return max((ahead[0] - 1) if ahead else len(v) - 1, 0)
+
+
+def of_type(items: Iterable[MissionItem], mission_type: int) -> list[MissionItem]:
+    return [item for item in items if item.mission_type == mission_type]

@@ -1,0 +1,74 @@
+"""Altitude-offset planner (pure): fly the flagged segments higher (or lower), nothing else.
+
+Segment k joins vertices k and k+1 (:func:`companion.mission.vertices`).  Every vertex of a
+flagged segment is moved by the offset, in the item's own frame (relative, AMSL or terrain:
+a metre is a metre in each).  The item count, the ground track and every item without a
+position stay exactly as they were; ArduPilot's home is never touched.  So the leg before a
+flagged run climbs, the flagged run is flown at the offset altitude, and the first unflagged
+leg after it descends back to the planned altitude.  A limit the offset would break is an
+error, never a silent clip.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+from .mission import FRAMES_AMSL, MissionError, MissionItem, vertices
+
+
+class PlannerError(MissionError):
+    """The requested edit is impossible within the limits (or names unknown segments)."""
+
+
+@dataclass(frozen=True, slots=True)
+class OffsetSettings:
+    offset_m: float = 10.0
+    direction: str = "up"  # "up" or "down"
+    max_altitude_m: float = 120.0  # relative / terrain frames (height above home or ground)
+    min_altitude_m: float = 5.0  # relative / terrain frames, when going down
+    max_altitude_amsl_m: float | None = None  # AMSL frames, if the operator sets one
+
+    def __post_init__(self) -> None:
+        if not self.offset_m > 0:
+            raise PlannerError("offset must be positive (choose the direction separately)")
+        if self.direction not in ("up", "down"):
+            raise PlannerError(f"direction must be 'up' or 'down', not {self.direction!r}")
+
+    @property
+    def delta(self) -> float:
+        return self.offset_m if self.direction == "up" else -self.offset_m
+
+
+def plan_offsets(
+    items: Sequence[MissionItem],
+    flagged: Iterable[int],
+    settings: OffsetSettings | None = None,
+    *,
+    ardupilot: bool = False,
+) -> list[MissionItem]:
+    """The edited mission: the vertices of every flagged segment moved by the offset."""
+    settings = settings or OffsetSettings()
+    v = vertices(items, ardupilot=ardupilot)
+    flagged = sorted(set(flagged))
+    if flagged and not 0 <= flagged[0] <= flagged[-1] < len(v) - 1:
+        raise PlannerError(f"segments {flagged} outside 0..{len(v) - 2}")
+    moved = {v[k] for k in flagged} | {v[k + 1] for k in flagged}
+    out = list(items)
+    for index in sorted(moved):
+        item = items[index]
+        z = item.z + settings.delta
+        if item.frame in FRAMES_AMSL:
+            limit = settings.max_altitude_amsl_m
+            if limit is not None and z > limit:
+                raise PlannerError(f"item {index}: {z:.1f} m AMSL above the limit {limit} m")
+        elif z > settings.max_altitude_m:
+            raise PlannerError(
+                f"item {index}: {z:.1f} m above the maximum altitude {settings.max_altitude_m} m"
+            )
+        elif z < settings.min_altitude_m:
+            raise PlannerError(
+                f"item {index}: {z:.1f} m below the minimum altitude {settings.min_altitude_m} m"
+            )
+        out[index] = item.replace(z=z)
+    return out
