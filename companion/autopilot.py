@@ -115,6 +115,21 @@ class Autopilot:
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
 
+    async def position(self, timeout_s: float = 5.0) -> tuple[float, float, float]:
+        """The vehicle's latest (lat, lon, alt AMSL) from GLOBAL_POSITION_INT telemetry."""
+        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+        telemetry = TelemetryAsync(self.system)
+        try:
+            stream = telemetry.subscribe_position()
+            p = await asyncio.wait_for(anext(stream), timeout_s)
+            await stream.aclose()
+        except TimeoutError:
+            raise AutopilotError(f"no position telemetry within {timeout_s} s") from None
+        finally:
+            telemetry.destroy()
+        return float(p.latitude_deg), float(p.longitude_deg), float(p.absolute_altitude_m)
+
     async def _call(self, what: str, call: Any) -> Any:
         from mavsdk.asyncio.plugins.mission_raw import MissionRawError
 

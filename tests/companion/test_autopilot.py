@@ -313,3 +313,10 @@ async def test_takeoff_rtl_and_land_items_are_flown() -> None:
     assert north == pytest.approx(HOME[0] + 0.0005, abs=3e-5)
     _, lat, lon, _ = mock.trajectory[-1]
     assert (lat, lon) == pytest.approx(HOME[:2], abs=3e-5)
+
+
+async def test_position_telemetry_reaches_mavsdk() -> None:
+    async with vehicle(survey(3)) as (_, ap):
+        lat, lon, alt = await ap.position()
+    assert (lat, lon) == pytest.approx(HOME[:2], abs=1e-6)
+    assert alt == pytest.approx(HOME[2], abs=0.01)
