@@ -14,7 +14,8 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m protocol demo
+	$(PY) -m companion replay sitl_configs/scenarios/crossing.toml \
+		--out out/crossing.json --plot out/crossing.png
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check protocol companion tests scripts
@@ -30,4 +31,4 @@ bench: $(STAMP)
 	$(PY) -m protocol bench crypto
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis out

@@ -1,4 +1,4 @@
-"""Command line: ``python -m companion {link-hub, mock-autopilot, mission show}``."""
+"""Command line: ``python -m companion {replay, link-hub, mock-autopilot, mission show}``."""
 
 from __future__ import annotations
 
@@ -111,6 +111,29 @@ def _mission_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _replay(args: argparse.Namespace) -> int:
+    import json
+    import logging
+    from pathlib import Path
+
+    from .replay import format_report, load_scenario, plot_report, run_replay
+
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    scenario = load_scenario(args.scenario)
+    report = asyncio.run(run_replay(scenario, progress=not args.json))
+    if args.out:
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_suffix(out.suffix + ".tmp")
+        tmp.write_text(json.dumps(report, indent=2) + "\n")
+        tmp.replace(out)
+    if args.plot:
+        plot_report(report, args.plot)
+    print(json.dumps(report, indent=2) if args.json else format_report(report))
+    ok = report["finished"] and report["conflicts_resolved"] == report["conflicts"]
+    return 0 if ok and report["false_alarms"] == 0 else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m companion", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -148,8 +171,16 @@ def main(argv: list[str] | None = None) -> int:
     show.add_argument("file")
     show.add_argument("--ardupilot", action="store_true", help="item 0 is home")
 
+    replay = sub.add_parser("replay", help="fly a scenario: mock autopilots, MAVSDK, companions")
+    replay.add_argument("scenario", help="scenario TOML (see sitl_configs/scenarios/)")
+    replay.add_argument("--json", action="store_true", help="print the report as JSON")
+    replay.add_argument("--out", help="also write the JSON report to this file")
+    replay.add_argument("--plot", help="write a PNG: ground tracks and altitude profiles")
+
     args = parser.parse_args(argv)
     try:
+        if args.command == "replay":
+            return _replay(args)
         if args.command == "link-hub":
             return asyncio.run(_hub(args))
         if args.command == "mock-autopilot":

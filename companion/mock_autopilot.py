@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from .mission import (
     FRAMES_AMSL,
     NAV_LAND,
+    NAV_LOITER_TIME,
     NAV_RETURN_TO_LAUNCH,
     NAV_TAKEOFF,
     MissionItem,
@@ -127,7 +128,7 @@ class MockAutopilot(asyncio.DatagramProtocol):
         self.mav.robust_parsing = True
         self.stores: dict[int, list[MissionItem]] = {0: [], 1: [], 2: []}
         if mission:
-            self.stores[0] = [m.replace(current=0) for m in mission]
+            self.stores[0] = [m.replace(seq=i, current=0) for i, m in enumerate(mission)]
         if ardupilot and not self.stores[0]:
             self.stores[0] = [self._home_item()]
         self.current = 1 if ardupilot and len(self.stores[0]) > 1 else 0
@@ -145,17 +146,21 @@ class MockAutopilot(asyncio.DatagramProtocol):
         self._transport: asyncio.DatagramTransport | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._started = 0.0
+        self.origin = 0.0
         self._sim_time = 0.0
         self._takeoff_alt: float | None = None
         self._garbles_left = self.faults.garble_uploads
         self._rtl_descending = False
+        self._hold_until: float | None = None
 
     # ------------------------------------------------------------------ lifecycle
 
-    async def start(self) -> MockAutopilot:
+    async def start(self, origin: float | None = None) -> MockAutopilot:
+        """Bind and run; ``origin`` (time.monotonic) is simulated time zero."""
         loop = asyncio.get_running_loop()
         await loop.create_datagram_endpoint(lambda: self, local_addr=(self.host, self.bind_port))
         self._started = time.monotonic()
+        self.origin = self._started if origin is None else origin
         self._tasks = [
             asyncio.create_task(self._heartbeats()),
             asyncio.create_task(self._fly()),
@@ -360,7 +365,7 @@ class MockAutopilot(asyncio.DatagramProtocol):
         if self._garbles_left and items:  # a partial/garbled write, caught by read-back
             self._garbles_left -= 1
             items = [*items[:-1], items[-1].replace(z=items[-1].z + 1000.0)]
-        self.stores[kind] = [it.replace(current=0) for it in items]
+        self.stores[kind] = [it.replace(seq=i, current=0) for i, it in enumerate(items)]
         if kind == 0:
             marked = [it.seq for it in items if it.current]
             if not self.mission_running:
@@ -511,6 +516,12 @@ class MockAutopilot(asyncio.DatagramProtocol):
     def _advance(self) -> None:
         """The current item is reached (or has no position): report it and go on."""
         item = self.mission[self.current]
+        if item.command == NAV_LOITER_TIME and item.has_position:
+            if self._hold_until is None:
+                self._hold_until = self._sim_time + max(item.param1, 0.0)
+            if self._sim_time < self._hold_until:
+                return  # holding over the loiter point
+            self._hold_until = None
         if item.command == NAV_RETURN_TO_LAUNCH and not self._rtl_descending:
             self._rtl_descending = True  # over home: now land there
             return
@@ -524,17 +535,27 @@ class MockAutopilot(asyncio.DatagramProtocol):
             self.mission_running = False  # end of the mission: hold position (PX4: loiter)
         self._send(self.mav.mission_current_encode(self.current, len(self.mission), 0, 0))
 
+    def sim_time(self) -> float:
+        """Simulated seconds since ``origin`` (shared by the vehicles of a replay)."""
+        return (time.monotonic() - self.origin) * self.flight.time_scale
+
     async def _fly(self) -> None:
-        f = self.flight
-        period = 1.0 / f.rate_hz
+        """Advance the model to the simulated time in steps of at most 0.5 s, whatever the
+        time scale, recording every step; send telemetry once per wake-up."""
+        period = 1.0 / self.flight.rate_hz
         while True:
             await asyncio.sleep(period)
             if self._vanished():
                 continue
-            dt = period * f.time_scale
-            self._sim_time += dt
-            self._step(dt)
-            self.trajectory.append((self._sim_time, self.lat, self.lon, self.home[2] + self.alt))
+            target = self.sim_time()
+            steps = max(1, math.ceil((target - self._sim_time) / 0.5))
+            dt = (target - self._sim_time) / steps
+            for _ in range(steps):
+                self._sim_time += dt
+                self._step(dt)
+                self.trajectory.append(
+                    (self._sim_time, self.lat, self.lon, self.home[2] + self.alt)
+                )
             self._send(
                 self.mav.global_position_int_encode(
                     int(self._sim_time * 1000) & 0xFFFFFFFF,

@@ -309,11 +309,12 @@ class LinkEndpoint:
             return item
 
     async def beacon(self, payload: bytes) -> None:
-        """Broadcast one beacon frame (unacknowledged)."""
+        """Broadcast one beacon frame (unacknowledged; it spends the data budget, not the
+        reserve kept for acknowledgements)."""
         frame = Frame(FrameType.BEACON, self.node, BROADCAST, 0, payload=payload)
         if len(frame.encode()) > self.frame_size:
             raise MessageTooLarge(f"beacon of {len(payload)} bytes exceeds one frame")
-        await self._enqueue(frame, control=True)
+        await self._enqueue(frame, control=False)
 
     def _raise_if_aborted(self, sess: _Session) -> None:
         if sess.aborted is not None:

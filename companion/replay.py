@@ -1,0 +1,460 @@
+"""Scripted replays: mock autopilots, real MAVSDK, companions and one simulated radio.
+
+``python -m companion replay SCENARIO.toml [--json]``.  A scenario (TOML)::
+
+    time_scale = 20          # simulated seconds per real second
+    time_limit_s = 900       # simulated
+    offset_m = 10            # optional
+    [link]
+    profile = "us915-sf7"
+    loss = 0.1
+    seed = 1
+    [[drone]]
+    id = 1
+    mission = "a.plan"       # relative to the scenario file
+    takeoff_delay_s = 0      # optional
+    autopilot = "px4"        # or "ardupilot"
+
+Each drone gets a :class:`~companion.mock_autopilot.MockAutopilot` on loopback UDP, a
+:class:`~companion.autopilot.Autopilot` (MAVSDK) and a :class:`~companion.runtime.Companion`
+on the shared simulated channel.  The missions are flown in scaled time until every drone has
+finished or the time limit passes.  A baseline without companions (same missions, same
+schedule, the same flight model stepped offline) gives the separations one would have had.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import socket
+import sys
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from protocol.geometry import path_hits
+from protocol.grid import GridSpec
+
+from .autopilot import Autopilot
+from .link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
+from .mission import MissionError, MissionItem, normalise, path_of, segments
+from .missionfile import read_plan
+from .mock_autopilot import FlightModel, MockAutopilot
+from .planner import OffsetSettings
+from .runtime import Companion, CompanionSettings
+
+KINEMATIC_TOLERANCE_M = 2.0
+Track = list[tuple[float, float, float, float]]
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """What a plot needs beyond the report: flown and baseline trajectories, ground paths."""
+
+    flown: dict[int, Track]
+    baseline: dict[int, Track]
+    paths: dict[int, list[tuple[int, int]]]
+
+
+report_tracks: dict[int, Tracks] = {}  # by id() of the report dict, for plot_report
+
+
+class ScenarioError(ValueError):
+    """The scenario file is invalid."""
+
+
+@dataclass(frozen=True)
+class DroneSpec:
+    id: int
+    mission: list[MissionItem]
+    home: tuple[float, float, float]
+    takeoff_delay_s: float = 0.0
+    ardupilot: bool = False
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    time_scale: float
+    time_limit_s: float
+    link_profile: str
+    loss: float
+    seed: int | None
+    drones: list[DroneSpec]
+    offset_m: float = 10.0
+    cruise_m_s: float = 10.0
+    beacon_interval_s: float = 5.0
+    grid_radius_m: float = 2000.0
+    grid_resolution_mm: int = 500
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    path = Path(path)
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{path}: {exc}") from None
+
+    def number(table: dict[str, Any], key: str, default: float | None = None) -> float:
+        value = table.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int | float) or value < 0:
+            raise ScenarioError(f"{path}: {key} must be a non-negative number")
+        return float(value)
+
+    time_scale = number(doc, "time_scale", 20.0)
+    time_limit_s = number(doc, "time_limit_s", 900.0)
+    if time_scale <= 0:
+        raise ScenarioError(f"{path}: time_scale must be positive")
+    link = doc.get("link", {})
+    if not isinstance(link, dict):
+        raise ScenarioError(f"{path}: [link] must be a table")
+    try:
+        profile(str(link.get("profile", "us915-sf7")))
+    except ValueError as exc:
+        raise ScenarioError(f"{path}: {exc}") from None
+    raw_drones = doc.get("drone")
+    if not isinstance(raw_drones, list) or len(raw_drones) < 2:
+        raise ScenarioError(f"{path}: at least two [[drone]] tables are needed")
+    drones, ids = [], set()
+    for number_, raw in enumerate(raw_drones, start=1):
+        where = f"{path}: drone {number_}"
+        ident = raw.get("id")
+        if not isinstance(ident, int) or not 1 <= ident < 0xFFFF or ident in ids:
+            raise ScenarioError(f"{where}: id must be a unique integer 1..65534")
+        ids.add(ident)
+        kind = raw.get("autopilot", "px4")
+        if kind not in ("px4", "ardupilot"):
+            raise ScenarioError(f"{where}: autopilot must be 'px4' or 'ardupilot'")
+        mission_file = raw.get("mission")
+        if not isinstance(mission_file, str):
+            raise ScenarioError(f"{where}: mission must be a file name")
+        try:
+            items, home = read_plan(path.parent / mission_file)
+        except MissionError as exc:
+            raise ScenarioError(f"{where}: {exc}") from None
+        home3 = (home[0], home[1], home[2] if math.isfinite(home[2]) else 488.0)
+        if kind == "ardupilot":
+            home_item = MissionItem(
+                0, 0, 16, 0, 1, 0, 0, 0, 0, round(home3[0] * 1e7), round(home3[1] * 1e7), home3[2]
+            )
+            items = normalise([home_item, *items])
+        drones.append(
+            DroneSpec(ident, items, home3, number(raw, "takeoff_delay_s", 0.0), kind == "ardupilot")
+        )
+    return Scenario(
+        name=path.stem,
+        time_scale=time_scale,
+        time_limit_s=time_limit_s,
+        link_profile=str(link.get("profile", "us915-sf7")),
+        loss=number(link, "loss", 0.0),
+        seed=link.get("seed") if isinstance(link.get("seed"), int) else None,
+        drones=drones,
+        offset_m=number(doc, "offset_m", 10.0),
+        cruise_m_s=number(doc, "cruise_m_s", 10.0),
+        beacon_interval_s=number(doc, "beacon_interval_s", 5.0),
+        grid_radius_m=number(doc, "grid_radius_m", 2000.0),
+        grid_resolution_mm=int(number(doc, "grid_resolution_mm", 500)) or 500,
+    )
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _enu(a: tuple[float, float, float], ref: tuple[float, float]) -> tuple[float, float, float]:
+    north = math.radians(a[0] - ref[0]) * 6_371_000
+    east = math.radians(a[1] - ref[1]) * 6_371_000 * math.cos(math.radians(ref[0]))
+    return north, east, a[2]
+
+
+def closest_approach(
+    a: list[tuple[float, float, float, float]], b: list[tuple[float, float, float, float]]
+) -> float:
+    """Smallest 3-D distance between two trajectories sampled on (nearly) the same times."""
+    if not a or not b:
+        return math.inf
+    ref = (a[0][1], a[0][2])
+    best, j = math.inf, 0
+    for t, lat, lon, alt in a:
+        while j + 1 < len(b) and abs(b[j + 1][0] - t) <= abs(b[j][0] - t):
+            j += 1
+        pa = _enu((lat, lon, alt), ref)
+        pb = _enu((b[j][1], b[j][2], b[j][3]), ref)
+        best = min(best, math.dist(pa, pb))
+    return best
+
+
+def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float, float]]]:
+    """The baseline: the same missions and schedule through the same flight model, no radio."""
+    rate = 10.0
+    mocks = {
+        d.id: MockAutopilot(
+            0,
+            mission=d.mission,
+            home=d.home,
+            ardupilot=d.ardupilot,
+            flight=FlightModel(cruise_m_s=scenario.cruise_m_s, rate_hz=rate),
+        )
+        for d in scenario.drones
+    }
+    started: set[int] = set()
+    t, dt = 0.0, 1.0 / rate
+    while t < scenario.time_limit_s:
+        for d in scenario.drones:
+            mock = mocks[d.id]
+            if d.id not in started and t >= d.takeoff_delay_s:
+                mock.armed = mock.flying = mock.mission_running = True
+                started.add(d.id)
+            mock._sim_time = t
+            mock._step(dt)
+            mock.trajectory.append((t, mock.lat, mock.lon, mock.home[2] + mock.alt))
+        t += dt
+        if len(started) == len(mocks) and not any(m.mission_running for m in mocks.values()):
+            break
+    return {k: m.trajectory for k, m in mocks.items()}
+
+
+async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str, Any]:
+    ts = scenario.time_scale
+    clock = Clock(ts)
+    medium = SimMedium(Channel(Impairments(loss=scenario.loss), scenario.seed), clock)
+    link = profile(scenario.link_profile)
+    mocks: dict[int, MockAutopilot] = {}
+    companions: dict[int, Companion] = {}
+    autopilots: list[Autopilot] = []
+    flight = FlightModel(cruise_m_s=scenario.cruise_m_s, time_scale=ts, rate_hz=20.0)
+    origin = time.monotonic()  # simulated time zero for every vehicle and the schedule
+
+    def say(message: str) -> None:
+        if progress:
+            print(f"  ... {message}", file=sys.stderr, flush=True)
+
+    try:
+        for d in scenario.drones:
+            bind, send = _free_port(), _free_port()
+            mock = MockAutopilot(
+                0,
+                mission=d.mission,
+                home=d.home,
+                ardupilot=d.ardupilot,
+                flight=flight,
+                bind_port=bind,
+                send_port=send,
+            )
+            mocks[d.id] = await mock.start(origin)
+            ap = await Autopilot.connect(f"udpin://127.0.0.1:{send}")
+            autopilots.append(ap)
+            settings = CompanionSettings(
+                node=d.id,
+                autopilot_url=f"udpin://127.0.0.1:{send}",
+                ardupilot=d.ardupilot,
+                offset=OffsetSettings(offset_m=scenario.offset_m),
+                beacon_interval_s=scenario.beacon_interval_s,
+                grid_radius_m=scenario.grid_radius_m,
+                grid_resolution_mm=scenario.grid_resolution_mm,
+            )
+            endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
+            companions[d.id] = Companion(settings, endpoint, ap)
+            await companions[d.id].start()
+            say(f"drone {d.id}: mock autopilot, MAVSDK and companion up")
+        origin = time.monotonic()  # simulated time zero: everything is up
+        for mock in mocks.values():
+            mock.origin, mock._sim_time = origin, 0.0
+            mock.trajectory.clear()
+        started: set[int] = set()
+        while True:
+            sim = (time.monotonic() - origin) * ts
+            for d in scenario.drones:
+                if d.id not in started and sim >= d.takeoff_delay_s:
+                    mock = mocks[d.id]
+                    mock.armed = mock.flying = mock.mission_running = True
+                    started.add(d.id)
+                    say(f"t={sim:.0f} s: drone {d.id} takes off")
+            done = len(started) == len(mocks) and not any(m.mission_running for m in mocks.values())
+            if done or sim >= scenario.time_limit_s:
+                break
+            await asyncio.sleep(0.01)
+        say(f"t={sim:.0f} s: {'all missions flown' if done else 'time limit'}")
+    finally:
+        for companion in companions.values():
+            await companion.stop()
+        for ap in autopilots:
+            await ap.close()
+        for mock in mocks.values():
+            await mock.stop()
+    baseline = _fly_offline(scenario)
+    report = _report(scenario, mocks, companions, baseline, done)
+    report_tracks[id(report)] = Tracks(
+        {k: m.trajectory for k, m in mocks.items()},
+        baseline,
+        {d.id: path_of(d.mission, ardupilot=d.ardupilot) for d in scenario.drones},
+    )
+    return report
+
+
+def _report(
+    scenario: Scenario,
+    mocks: dict[int, MockAutopilot],
+    companions: dict[int, Companion],
+    baseline: dict[int, list[tuple[float, float, float, float]]],
+    finished: bool,
+) -> dict[str, Any]:
+    first = scenario.drones[0]
+    grid = GridSpec.geo(
+        round(first.home[0] * 1e7), round(first.home[1] * 1e7), radius_m=scenario.grid_radius_m
+    )
+    paths = {
+        d.id: grid.project_path(path_of(d.mission, ardupilot=d.ardupilot)) for d in scenario.drones
+    }
+    drones, false_alarms = [], 0
+    for d in scenario.drones:
+        c = companions[d.id]
+        others = [p for k, p in paths.items() if k != d.id]
+        plain = [any(h) for h in zip(*(path_hits(paths[d.id], o) for o in others), strict=True)]
+        flagged = sorted(c.flagged)
+        false_alarms += sum(1 for k in flagged if not plain[k])
+        stats = c.endpoint.stats
+        drones.append(
+            {
+                "id": d.id,
+                "autopilot": "ardupilot" if d.ardupilot else "px4",
+                "segments": len(segments(d.mission, ardupilot=d.ardupilot)),
+                "conflicting_segments": [k for k, h in enumerate(plain) if h],
+                "flagged_segments": flagged,
+                "edits": [e.detail for e in c.events if e.kind == "uploaded"],
+                "verified": any(e.kind == "uploaded" for e in c.events),
+                "runs": [e.detail for e in c.events if e.kind == "result"],
+                "failures": [e.detail | {"kind": e.kind} for e in c.events if "failed" in e.kind],
+                "bytes_sent": stats.bytes_sent,
+                "frames_sent": stats.frames_sent,
+                "airtime_s": round(stats.airtime_s, 3),
+                "max_altitude_m": max((alt for *_, alt in mocks[d.id].trajectory), default=0.0),
+            }
+        )
+    pairs, resolved, conflicts = [], 0, 0
+    ids = [d.id for d in scenario.drones]
+    for i, a in enumerate(ids):
+        for b in ids[i + 1 :]:
+            crossing = any(path_hits(paths[a], paths[b]))
+            with_companion = closest_approach(mocks[a].trajectory, mocks[b].trajectory)
+            without = closest_approach(baseline[a], baseline[b])
+            ok = with_companion >= scenario.offset_m - KINEMATIC_TOLERANCE_M
+            conflicts += crossing
+            resolved += crossing and ok
+            pairs.append(
+                {
+                    "drones": [a, b],
+                    "paths_cross": crossing,
+                    "closest_approach_m": round(with_companion, 2),
+                    "closest_approach_baseline_m": round(without, 2),
+                }
+            )
+    return {
+        "scenario": scenario.name,
+        "link": {"profile": scenario.link_profile, "loss": scenario.loss, "seed": scenario.seed},
+        "time_scale": scenario.time_scale,
+        "finished": finished,
+        "offset_m": scenario.offset_m,
+        "drones": drones,
+        "pairs": pairs,
+        "conflicts": conflicts,
+        "conflicts_resolved": resolved,
+        "false_alarms": false_alarms,
+    }
+
+
+def format_report(report: dict[str, Any]) -> str:
+    lines = [
+        f"Replay {report['scenario']} over {report['link']['profile']} "
+        f"(loss {report['link']['loss']:.0%}), time scale {report['time_scale']}x:"
+    ]
+    for d in report["drones"]:
+        if d["edits"]:
+            what = (
+                f"climbed {report['offset_m']:.0f} m on segments {d['flagged_segments']} "
+                "(upload verified)"
+            )
+        else:
+            what = "kept its altitude"
+        lines.append(
+            f"  drone {d['id']} ({d['autopilot']}): {what}; radio "
+            f"{d['bytes_sent']} B in {d['frames_sent']} frames, "
+            f"{d['airtime_s']:.1f} s airtime"
+        )
+    for p in report["pairs"]:
+        a, b = p["drones"]
+        lines.append(
+            f"  drones {a}-{b}: closest approach {p['closest_approach_baseline_m']:.1f} m "
+            f"without the companion, {p['closest_approach_m']:.1f} m with it"
+        )
+    lines.append(
+        f"  conflicts resolved {report['conflicts_resolved']}/{report['conflicts']}, "
+        f"false alarms {report['false_alarms']}"
+    )
+    return "\n".join(lines)
+
+
+def plot_report(report: dict[str, Any], out: str | Path) -> None:
+    """PNG: ground tracks with the flagged segments, altitude over time before and after."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tracks = report_tracks[id(report)]
+    ref = next(iter(tracks.paths.values()))[0]
+
+    def en(lat: float, lon: float) -> tuple[float, float]:
+        north, east, _ = _enu((lat, lon, 0.0), (ref[0] / 1e7, ref[1] / 1e7))
+        return east, north
+
+    fig, (ground, height) = plt.subplots(1, 2, figsize=(13, 5.5))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for n, drone in enumerate(report["drones"]):
+        colour = colours[n % len(colours)]
+        path = [en(lat / 1e7, lon / 1e7) for lat, lon in tracks.paths[drone["id"]]]
+        ground.plot(
+            *zip(*path, strict=True), "o-", color=colour, lw=1.2, label=f"drone {drone['id']}"
+        )
+        for k in drone["flagged_segments"]:
+            (x0, y0), (x1, y1) = path[k], path[k + 1]
+            ground.plot([x0, x1], [y0, y1], color="red", lw=5, alpha=0.35)
+        flown = tracks.flown[drone["id"]]
+        base = tracks.baseline[drone["id"]]
+        height.plot(
+            [t for t, *_ in base],
+            [a for *_, a in base],
+            "--",
+            color=colour,
+            lw=1,
+            label=f"drone {drone['id']} planned",
+        )
+        height.plot(
+            [t for t, *_ in flown],
+            [a for *_, a in flown],
+            color=colour,
+            lw=1.5,
+            label=f"drone {drone['id']} flown",
+        )
+    ground.plot([], [], color="red", lw=5, alpha=0.35, label="flagged segments")
+    ground.set(xlabel="east (m)", ylabel="north (m)", title=f"{report['scenario']}: ground tracks")
+    ground.set_aspect("equal", adjustable="datalim")
+    ground.legend(loc="best", fontsize=8)
+    height.set(
+        xlabel="simulated time (s)",
+        ylabel="altitude AMSL (m)",
+        title="altitude before (dashed) and after (solid)",
+    )
+    height.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(out)
