@@ -1,4 +1,4 @@
-"""Command line: ``python -m companion {replay, link-hub, mock-autopilot, mission show}``."""
+"""Command line: ``python -m companion {run, replay, link-hub, mock-autopilot, mission show}``."""
 
 from __future__ import annotations
 
@@ -12,13 +12,14 @@ from .link import Channel, Clock, Impairments
 from .link.udp import UdpHub
 
 
-async def _until_signalled() -> None:
+def _stop_on_signals() -> asyncio.Event:
+    """An event set by SIGINT/SIGTERM (install before announcing readiness)."""
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         with contextlib.suppress(NotImplementedError):
             loop.add_signal_handler(sig, stop.set)
-    await stop.wait()
+    return stop
 
 
 async def _hub(args: argparse.Namespace) -> int:
@@ -32,8 +33,9 @@ async def _hub(args: argparse.Namespace) -> int:
     channel = Channel(impairments, args.seed, collisions=not args.no_collisions)
     hub = await UdpHub.serve(channel, args.host, args.port, Clock(args.time_scale))
     host, port = hub.address
+    stop = _stop_on_signals()
     print(f"link hub on udp://{host}:{port} ({impairments})", flush=True)
-    await _until_signalled()
+    await stop.wait()
     hub.close()
     print(f"hub stopped: {channel.stats}", flush=True)
     return 0
@@ -61,13 +63,14 @@ async def _mock(args: argparse.Namespace) -> int:
         home=(args.home_lat, args.home_lon, args.home_alt),
     )
     async with mock:
+        stop = _stop_on_signals()
         kind = "ArduPilot" if args.ardupilot else "PX4"
         print(
             f"mock {kind} autopilot, system {mock.sysid}: listening on udp {mock.host}:"
             f"{mock.bind_port}, sending to {mock.send_port} ({len(mission)} mission items)",
             flush=True,
         )
-        await _until_signalled()
+        await stop.wait()
     if args.trajectory:
         with open(args.trajectory, "w", encoding="utf-8") as handle:
             handle.write("t_s,lat,lon,alt_m\n")
@@ -108,6 +111,65 @@ def _mission_show(args: argparse.Namespace) -> int:
     print("\nSegments (what the protocol compares):")
     for k, (a, b) in enumerate(segments(items, ardupilot=args.ardupilot)):
         print(f"  segment {k}: item {a} -> item {b}")
+    return 0
+
+
+async def _run(args: argparse.Namespace) -> int:
+    import logging
+
+    from .autopilot import Autopilot
+    from .config import load_config
+    from .link import LinkEndpoint, profile
+    from .link.medium import Transport
+    from .runtime import Companion
+
+    config = load_config(
+        args.config,
+        {
+            "node": args.node,
+            "autopilot": args.autopilot,
+            "log_level": args.log_level,
+            "link.transport": args.transport,
+            "link.profile": args.profile,
+            "link.hub": args.hub,
+            "link.serial": args.serial,
+            "offset.offset_m": args.offset,
+            "offset.max_altitude_m": args.max_altitude,
+        },
+    )
+    logging.basicConfig(
+        level=config.log_level.upper(),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    log = logging.getLogger("companion")
+    settings, link = config.companion, config.link
+    transport: Transport
+    if link.transport == "serial":
+        from .link.serial_port import SerialTransport
+
+        transport = SerialTransport.open(link.serial, link.baudrate)
+    else:
+        from .link.udp import UdpTransport
+
+        transport = await UdpTransport.connect(settings.node, link.hub)
+    endpoint = LinkEndpoint(settings.node, transport, profile(link.profile))
+    log.info("node %d: connecting to the autopilot at %s", settings.node, settings.autopilot_url)
+    autopilot = await Autopilot.connect(settings.autopilot_url)
+    companion = Companion(settings, endpoint, autopilot)
+    stop = _stop_on_signals()
+    try:
+        await companion.start()
+        log.info(
+            "node %d: running (link %s over %s); SIGINT/SIGTERM to stop",
+            settings.node,
+            link.profile,
+            link.transport,
+        )
+        await stop.wait()
+        log.info("node %d: stopping", settings.node)
+    finally:
+        await companion.stop()
+        await autopilot.close()
     return 0
 
 
@@ -177,8 +239,28 @@ def main(argv: list[str] | None = None) -> int:
     replay.add_argument("--out", help="also write the JSON report to this file")
     replay.add_argument("--plot", help="write a PNG: ground tracks and altitude profiles")
 
+    run = sub.add_parser("run", help="the companion process beside one autopilot")
+    run.add_argument("--config", help="TOML settings (see companion/config.py)")
+    run.add_argument("--node", type=int, help="node id on the radio")
+    run.add_argument("--autopilot", help="MAVSDK URL, e.g. udpin://0.0.0.0:14540")
+    run.add_argument("--transport", choices=["udp", "serial"], help="link transport")
+    run.add_argument("--profile", help="link profile, e.g. us915-sf7")
+    run.add_argument("--hub", help="link hub HOST:PORT (udp transport)")
+    run.add_argument("--serial", help="serial device of the LoRa modem")
+    run.add_argument("--offset", type=float, help="altitude offset in metres")
+    run.add_argument("--max-altitude", type=float, help="metres above home")
+    run.add_argument("--log-level", choices=["debug", "info", "warning", "error"])
+
     args = parser.parse_args(argv)
     try:
+        if args.command == "run":
+            from .autopilot import AutopilotError
+
+            try:
+                return asyncio.run(_run(args))
+            except AutopilotError as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return 1
         if args.command == "replay":
             return _replay(args)
         if args.command == "link-hub":

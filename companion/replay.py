@@ -41,7 +41,7 @@ from .autopilot import Autopilot
 from .link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
 from .mission import MissionError, MissionItem, normalise, path_of, segments
 from .missionfile import read_plan
-from .mock_autopilot import FlightModel, MockAutopilot
+from .mock_autopilot import Faults, FlightModel, MockAutopilot
 from .planner import OffsetSettings
 from .runtime import Companion, CompanionSettings
 
@@ -72,6 +72,8 @@ class DroneSpec:
     home: tuple[float, float, float]
     takeoff_delay_s: float = 0.0
     ardupilot: bool = False
+    faults: Faults = field(default_factory=Faults)  # of its mock autopilot
+    companion_stop_s: float | None = None  # the companion vanishes at this simulated time
 
 
 @dataclass(frozen=True)
@@ -226,6 +228,7 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str,
     link = profile(scenario.link_profile)
     mocks: dict[int, MockAutopilot] = {}
     companions: dict[int, Companion] = {}
+    vanished: dict[int, Companion] = {}
     autopilots: list[Autopilot] = []
     flight = FlightModel(cruise_m_s=scenario.cruise_m_s, time_scale=ts, rate_hz=20.0)
     origin = time.monotonic()  # simulated time zero for every vehicle and the schedule
@@ -243,6 +246,7 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str,
                 home=d.home,
                 ardupilot=d.ardupilot,
                 flight=flight,
+                faults=d.faults,
                 bind_port=bind,
                 send_port=send,
             )
@@ -270,7 +274,14 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str,
         while True:
             sim = (time.monotonic() - origin) * ts
             for d in scenario.drones:
-                if d.id not in started and sim >= d.takeoff_delay_s:
+                gone = companions.get(d.id)
+                if d.companion_stop_s is not None and sim >= d.companion_stop_s and gone:
+                    await gone.stop()  # the peer vanishes: its radio goes silent
+                    vanished[d.id] = companions.pop(d.id)
+                    say(f"t={sim:.0f} s: drone {d.id}'s companion vanishes")
+                waiting = d.id in companions and companions[d.id].comparing
+                if d.id not in started and sim >= d.takeoff_delay_s and not waiting:
+                    # a drone about to take off waits for its comparison to finish
                     mock = mocks[d.id]
                     mock.armed = mock.flying = mock.mission_running = True
                     started.add(d.id)
@@ -288,7 +299,7 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str,
         for mock in mocks.values():
             await mock.stop()
     baseline = _fly_offline(scenario)
-    report = _report(scenario, mocks, companions, baseline, done)
+    report = _report(scenario, mocks, companions | vanished, baseline, done)
     report_tracks[id(report)] = Tracks(
         {k: m.trajectory for k, m in mocks.items()},
         baseline,
@@ -334,6 +345,7 @@ def _report(
                 "frames_sent": stats.frames_sent,
                 "airtime_s": round(stats.airtime_s, 3),
                 "max_altitude_m": max((alt for *_, alt in mocks[d.id].trajectory), default=0.0),
+                "vehicle_holds": _holds(mocks[d.id].mission, d.mission, c.mission),
             }
         )
     pairs, resolved, conflicts = [], 0, 0
@@ -366,6 +378,20 @@ def _report(
         "conflicts_resolved": resolved,
         "false_alarms": false_alarms,
     }
+
+
+def _holds(held: list[MissionItem], original: list[MissionItem], edited: list[MissionItem]) -> str:
+    """Which mission the vehicle ended with: the original, the companion's edit, or neither."""
+
+    def same(a: list[MissionItem], b: list[MissionItem]) -> bool:
+        return len(a) == len(b) and all(
+            x.replace(current=0, seq=0).same_as(y.replace(current=0, seq=0))
+            for x, y in zip(a, b, strict=True)
+        )
+
+    if same(held, original):
+        return "original"
+    return "edited" if same(held, edited) else "other"
 
 
 def format_report(report: dict[str, Any]) -> str:

@@ -161,6 +161,11 @@ class Companion:
         await self.endpoint.close()
 
     @property
+    def comparing(self) -> bool:
+        """A comparison as Alice is under way (a drone about to take off waits for it)."""
+        return self._busy.locked()
+
+    @property
     def on_ground(self) -> bool:
         return self.relative_alt < 1.0
 

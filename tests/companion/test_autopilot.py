@@ -134,8 +134,9 @@ async def test_a_refused_upload_leaves_the_old_mission(faults: Faults) -> None:
 
 async def test_a_vanished_autopilot_is_reported_not_waited_on() -> None:
     timeouts = Timeouts(transfer_s=5.0, retries=0)
-    async with vehicle(survey(5), faults=Faults(vanish_after_s=1.0), timeouts=timeouts) as (_, ap):
-        await asyncio.sleep(1.2)
+    async with vehicle(survey(5), faults=Faults(vanish_after_s=4.0), timeouts=timeouts) as (_, ap):
+        await ap.download()  # alive ...
+        await asyncio.sleep(4.2)  # ... then gone
         start = time.monotonic()
         with pytest.raises(AutopilotError, match="download failed"):
             await ap.download()

@@ -1,0 +1,132 @@
+"""Settings of ``python -m companion run``: a TOML file, every key also a command-line flag.
+
+::
+
+    node = 1
+    autopilot = "udpin://0.0.0.0:14540"   # MAVSDK URL; PX4 SITL instance i: 14540 + i
+    ardupilot = false
+    log_level = "info"
+    [link]
+    transport = "udp"                     # "udp" (a link hub) or "serial" (a LoRa modem)
+    profile = "us915-sf7"
+    hub = "127.0.0.1:14600"
+    serial = "/dev/ttyUSB0"
+    baudrate = 115200
+    [offset]
+    offset_m = 10.0
+    direction = "up"
+    max_altitude_m = 120.0
+    [limits]
+    max_runs_per_peer = 6
+    run_timeout_s = 900.0
+    beacon_interval_s = 10.0
+    initiation_range_m = 5000.0
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .link.airtime import profile as link_profile
+from .planner import OffsetSettings
+from .runtime import CompanionSettings
+
+
+class ConfigError(ValueError):
+    """The configuration is invalid; says which key."""
+
+
+@dataclass(frozen=True)
+class LinkSettings:
+    transport: str = "udp"
+    profile: str = "us915-sf7"
+    hub: tuple[str, int] = ("127.0.0.1", 14600)
+    serial: str = "/dev/ttyUSB0"
+    baudrate: int = 115200
+
+
+@dataclass(frozen=True)
+class Config:
+    companion: CompanionSettings
+    link: LinkSettings
+    log_level: str = "info"
+
+
+def _get(table: dict[str, Any], key: str, kind: type, default: Any) -> Any:
+    value = table.get(key, default)
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+        raise ConfigError(f"{key}: expected {kind.__name__}, got {value!r}")
+    return value
+
+
+def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
+    """Read the TOML file (optional) and apply ``overrides`` (dotted keys, from flags)."""
+    doc: dict[str, Any] = {}
+    if path is not None:
+        try:
+            doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{path}: {exc}") from None
+    for dotted, value in (overrides or {}).items():
+        if value is None:
+            continue
+        table = doc
+        *parents, key = dotted.split(".")
+        for parent in parents:
+            table = table.setdefault(parent, {})
+        table[key] = value
+    link = doc.get("link", {})
+    offset = doc.get("offset", {})
+    limits = doc.get("limits", {})
+    node = _get(doc, "node", int, None) if "node" in doc else None
+    if node is None or not 1 <= node < 0xFFFF:
+        raise ConfigError("node: a node id 1..65534 is required")
+    transport = _get(link, "transport", str, "udp")
+    if transport not in ("udp", "serial"):
+        raise ConfigError("link.transport: 'udp' or 'serial'")
+    profile_name = _get(link, "profile", str, "us915-sf7")
+    try:
+        link_profile(profile_name)
+    except ValueError as exc:
+        raise ConfigError(f"link.profile: {exc}") from None
+    host, _, port = _get(link, "hub", str, "127.0.0.1:14600").rpartition(":")
+    if not host or not port.isdigit():
+        raise ConfigError("link.hub: HOST:PORT")
+    level = _get(doc, "log_level", str, "info").lower()
+    if level not in ("debug", "info", "warning", "error"):
+        raise ConfigError("log_level: debug, info, warning or error")
+    try:
+        offset_settings = OffsetSettings(
+            offset_m=_get(offset, "offset_m", float, 10.0),
+            direction=_get(offset, "direction", str, "up"),
+            max_altitude_m=_get(offset, "max_altitude_m", float, 120.0),
+        )
+    except ValueError as exc:
+        raise ConfigError(f"offset: {exc}") from None
+    timeout = limits.get("run_timeout_s", 900.0)
+    companion = CompanionSettings(
+        node=node,
+        autopilot_url=_get(doc, "autopilot", str, "udpin://0.0.0.0:14540"),
+        ardupilot=_get(doc, "ardupilot", bool, False),
+        offset=offset_settings,
+        beacon_interval_s=_get(limits, "beacon_interval_s", float, 10.0),
+        initiation_range_m=_get(limits, "initiation_range_m", float, 5000.0),
+        max_runs_per_peer=_get(limits, "max_runs_per_peer", int, 6),
+        run_timeout_s=None if timeout is None else _get(limits, "run_timeout_s", float, 900.0),
+    )
+    return Config(
+        companion,
+        LinkSettings(
+            transport,
+            profile_name,
+            (host, int(port)),
+            _get(link, "serial", str, "/dev/ttyUSB0"),
+            _get(link, "baudrate", int, 115200),
+        ),
+        level,
+    )

@@ -1,0 +1,116 @@
+"""``python -m companion run``: configuration, and a real process that starts and stops."""
+
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from companion.config import ConfigError, load_config
+from companion.missionfile import write_wpl
+
+from .missions import survey
+
+
+def test_config_file_and_flags(tmp_path: Path) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text(
+        'node = 3\nautopilot = "udpin://0.0.0.0:14542"\n[link]\nprofile = "eu868-sf7"\n'
+        "[offset]\noffset_m = 15\n[limits]\nmax_runs_per_peer = 2\n"
+    )
+    config = load_config(path, {"link.profile": "us915-sf9", "offset.max_altitude_m": 90})
+    assert config.companion.node == 3 and config.companion.offset.offset_m == 15.0
+    assert config.link.profile == "us915-sf9"  # the flag wins
+    assert config.companion.offset.max_altitude_m == 90.0
+    assert config.companion.max_runs_per_peer == 2
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("", "node"),
+        ("node = 1\n[link]\nprofile = 'lora'\n", "link.profile"),
+        ("node = 1\n[link]\ntransport = 'wifi'\n", "link.transport"),
+        ("node = 1\n[offset]\noffset_m = -3\n", "offset"),
+        ("node = 1\n[limits]\nmax_runs_per_peer = 'many'\n", "max_runs_per_peer"),
+        ("node = 1\nlog_level = 'loud'\n", "log_level"),
+        ("node = [", "c.toml"),
+    ],
+)
+def test_config_errors(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)
+
+
+def _spawn(*args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "companion", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+
+
+def _wait_for(proc: subprocess.Popen[str], pattern: str, seconds: float = 30) -> str:
+    assert proc.stdout is not None
+    deadline = time.monotonic() + seconds
+    seen = []
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        seen.append(line)
+        if re.search(pattern, line):
+            return line
+    raise AssertionError(f"{pattern!r} not seen in:\n{''.join(seen)[-3000:]}")
+
+
+@pytest.mark.slow
+def test_companion_process_starts_and_stops_cleanly(tmp_path: Path) -> None:
+    mission = tmp_path / "m.txt"
+    write_wpl(mission, survey(6))
+    hub = _spawn("link-hub", "--port", "0")
+    mock = _spawn("mock-autopilot", "--mission", str(mission), "--instance", "43")
+    try:
+        address = re.search(r"udp://([\d.]+:\d+)", _wait_for(hub, "link hub on"))
+        assert address
+        _wait_for(mock, "mock PX4 autopilot")
+        config = tmp_path / "c.toml"
+        config.write_text(
+            f'node = 7\nautopilot = "udpin://127.0.0.1:{14540 + 43}"\n'
+            f'[link]\nhub = "{address.group(1)}"\n'
+        )
+        companion = _spawn("run", "--config", str(config))
+        try:
+            _wait_for(companion, r"node 7 mission .*'segments': 4")
+            _wait_for(companion, "running")
+            companion.send_signal(signal.SIGTERM)
+            _wait_for(companion, "stopping")
+            assert companion.wait(30) == 0
+        finally:
+            companion.kill()
+    finally:
+        for proc in (hub, mock):
+            proc.terminate()
+            proc.wait(30)
+
+
+def test_no_autopilot_is_a_clear_error(tmp_path: Path) -> None:
+    config = tmp_path / "c.toml"
+    config.write_text(
+        'node = 7\nautopilot = "udpin://127.0.0.1:14599"\n[link]\nhub = "127.0.0.1:9"\n'
+    )
+    run = subprocess.run(
+        [sys.executable, "-m", "companion", "run", "--config", str(config)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert run.returncode == 1 and "no autopilot heard" in run.stderr
