@@ -84,28 +84,21 @@ def _mission_show(args: argparse.Namespace) -> int:
     from .missionfile import read_mission
 
     items = read_mission(args.file)
-    names = {
-        16: "WAYPOINT",
-        17: "LOITER_UNLIM",
-        18: "LOITER_TURNS",
-        19: "LOITER_TIME",
-        20: "RETURN_TO_LAUNCH",
-        21: "LAND",
-        22: "TAKEOFF",
-        31: "LOITER_TO_ALT",
-        82: "SPLINE_WAYPOINT",
-        178: "DO_CHANGE_SPEED",
-        183: "DO_SET_SERVO",
-        206: "DO_SET_CAM_TRIGG_DIST",
-        177: "DO_JUMP",
-    }
+    from pymavlink.dialects.v20 import common as mavlink
+
+    commands = mavlink.enums["MAV_CMD"]
+
+    def name(command: int) -> str:
+        """MAVLink's own name of a command (NAV_WAYPOINT, DO_CHANGE_SPEED, ...)."""
+        entry = commands.get(command)
+        return entry.name.removeprefix("MAV_CMD_") if entry is not None else str(command)
+
     v = set(vertices(items, ardupilot=args.ardupilot))
     print("| seq | command | frame | lat | lon | alt m | vertex |")
     print("|---:|---|---:|---:|---:|---:|---|")
     for it in items:
-        name = names.get(it.command, str(it.command))
         print(
-            f"| {it.seq} | {name} | {it.frame} | {it.x / 1e7:.7f} | {it.y / 1e7:.7f} "
+            f"| {it.seq} | {name(it.command)} | {it.frame} | {it.x / 1e7:.7f} | {it.y / 1e7:.7f} "
             f"| {it.z:.1f} | {'yes' if it.seq in v else ''} |"
         )
     print("\nSegments (what the protocol compares):")
@@ -182,7 +175,8 @@ def _replay(args: argparse.Namespace) -> int:
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     scenario = load_scenario(args.scenario)
-    report = asyncio.run(run_replay(scenario, progress=not args.json))
+    replay = asyncio.run(run_replay(scenario, progress=not args.json))
+    report = replay.report
     if args.out:
         out = Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -190,7 +184,7 @@ def _replay(args: argparse.Namespace) -> int:
         tmp.write_text(json.dumps(report, indent=2) + "\n")
         tmp.replace(out)
     if args.plot:
-        plot_report(report, args.plot)
+        plot_report(replay, args.plot)
     print(json.dumps(report, indent=2) if args.json else format_report(report))
     ok = report["finished"] and report["conflicts_resolved"] == report["conflicts"]
     return 0 if ok and report["false_alarms"] == 0 else 1

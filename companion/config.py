@@ -108,7 +108,6 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         )
     except ValueError as exc:
         raise ConfigError(f"offset: {exc}") from None
-    timeout = limits.get("run_timeout_s", 900.0)
     companion = CompanionSettings(
         node=node,
         autopilot_url=_get(doc, "autopilot", str, "udpin://0.0.0.0:14540"),
@@ -117,7 +116,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         beacon_interval_s=_get(limits, "beacon_interval_s", float, 10.0),
         initiation_range_m=_get(limits, "initiation_range_m", float, 5000.0),
         max_runs_per_peer=_get(limits, "max_runs_per_peer", int, 6),
-        run_timeout_s=None if timeout is None else _get(limits, "run_timeout_s", float, 900.0),
+        run_timeout_s=_get(limits, "run_timeout_s", float, 900.0),
     )
     return Config(
         companion,

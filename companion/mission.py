@@ -13,9 +13,9 @@ from __future__ import annotations
 import itertools
 import math
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, TypeVar
 
 # MAV_CMD values of NAV items that carry a position
 NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TURNS, NAV_LOITER_TIME = 16, 17, 18, 19
@@ -40,7 +40,6 @@ FRAMES_AMSL = frozenset({0, 5})  # GLOBAL, GLOBAL_INT
 FRAMES_RELATIVE = frozenset({3, 6})  # GLOBAL_RELATIVE_ALT(_INT)
 FRAMES_TERRAIN = frozenset({10, 11})  # GLOBAL_TERRAIN_ALT(_INT)
 FRAMES_GLOBAL = FRAMES_AMSL | FRAMES_RELATIVE | FRAMES_TERRAIN
-FRAME_MISSION = 2
 KNOWN_FRAMES = FRAMES_GLOBAL | {1, 2, 4, 7, 8, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21}
 MISSION_TYPES = {0: "mission", 1: "fence", 2: "rally"}
 
@@ -134,6 +133,23 @@ class MissionItem:
         )
 
 
+EARTH_RADIUS_M = 6_371_000.0
+P = TypeVar("P")
+
+
+def ground_offset(lat0: float, lon0: float, lat1: float, lon1: float) -> tuple[float, float]:
+    """(north, east) metres from point 0 to point 1 (degrees), on the local tangent plane --
+    plenty for the few kilometres between drones that talk over LoRa."""
+    north = math.radians(lat1 - lat0) * EARTH_RADIUS_M
+    east = math.radians(lon1 - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
+    return north, east
+
+
+def point_as_segment(path: Sequence[P]) -> list[P]:
+    """A path of one vertex (a drone holding position) as one zero-length segment."""
+    return list(path) * 2 if len(path) == 1 else list(path)
+
+
 def normalise(items: Sequence[MissionItem]) -> list[MissionItem]:
     """Sequence numbers 0..n-1 and exactly one current item (the first marked, else 0)."""
     marked = [i for i, item in enumerate(items) if item.current]
@@ -166,7 +182,3 @@ def remaining(items: Sequence[MissionItem], current: int, *, ardupilot: bool = F
     v = vertices(items, ardupilot=ardupilot)
     ahead = [k for k, index in enumerate(v) if index >= current]
     return max((ahead[0] - 1) if ahead else len(v) - 1, 0)
-
-
-def of_type(items: Iterable[MissionItem], mission_type: int) -> list[MissionItem]:
-    return [item for item in items if item.mission_type == mission_type]

@@ -22,16 +22,17 @@ from typing import Any, cast
 from pymavlink.dialects.v20 import common as mavlink
 
 from .mission import (
+    EARTH_RADIUS_M,
     FRAMES_AMSL,
     NAV_LAND,
     NAV_LOITER_TIME,
     NAV_RETURN_TO_LAUNCH,
     NAV_TAKEOFF,
     MissionItem,
+    ground_offset,
 )
 
 PX4_BIND, PX4_SEND = 14580, 14540
-EARTH_R = 6_371_000.0
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
 RETRY_S, RETRIES = 0.25, 8  # the autopilot drives uploads: it re-requests lost items
 
@@ -66,16 +67,11 @@ class _Upload:
     timer: asyncio.TimerHandle | None = None
 
 
-def _offset(lat: float, lon: float, north: float, east: float) -> tuple[float, float]:
-    dlat = math.degrees(north / EARTH_R)
-    dlon = math.degrees(east / (EARTH_R * math.cos(math.radians(lat))))
+def _moved(lat: float, lon: float, north: float, east: float) -> tuple[float, float]:
+    """The inverse of :func:`ground_offset`: a point moved by (north, east) metres."""
+    dlat = math.degrees(north / EARTH_RADIUS_M)
+    dlon = math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(lat))))
     return lat + dlat, lon + dlon
-
-
-def _delta(lat0: float, lon0: float, lat1: float, lon1: float) -> tuple[float, float]:
-    north = math.radians(lat1 - lat0) * EARTH_R
-    east = math.radians(lon1 - lon0) * EARTH_R * math.cos(math.radians(lat0))
-    return north, east
 
 
 def item_message(mav: Any, target_system: int, target_component: int, it: MissionItem) -> Any:
@@ -136,7 +132,6 @@ class MockAutopilot(asyncio.DatagramProtocol):
         self.armed = False
         self.flying = False
         self.mission_running = False
-        self.landed = True
         self.trajectory: list[tuple[float, float, float, float]] = []
         self.uploads_accepted = 0
         self.received: dict[str, int] = {}
@@ -497,16 +492,13 @@ class MockAutopilot(asyncio.DatagramProtocol):
             target = (self.lat, self.lon, self._takeoff_alt)
         if target is None or not self.flying:
             return
-        north, east = _delta(self.lat, self.lon, target[0], target[1])
+        north, east = ground_offset(self.lat, self.lon, target[0], target[1])
         dist = math.hypot(north, east)
         step = min(dist, f.cruise_m_s * dt)
         if dist > 0:
-            self.lat, self.lon = _offset(
-                self.lat, self.lon, north * step / dist, east * step / dist
-            )
+            self.lat, self.lon = _moved(self.lat, self.lon, north * step / dist, east * step / dist)
         dz = target[2] - self.alt
         self.alt += max(-f.climb_m_s * dt, min(f.climb_m_s * dt, dz))
-        self.landed = self.alt <= 0.05
         if dist - step <= f.acceptance_m and abs(target[2] - self.alt) <= 0.5:
             if self.mission_running:
                 self._advance()
@@ -527,13 +519,28 @@ class MockAutopilot(asyncio.DatagramProtocol):
             return
         self._send(self.mav.mission_item_reached_encode(self.current))
         if item.command in (NAV_LAND, NAV_RETURN_TO_LAUNCH):
-            self.alt, self.landed, self.armed = 0.0, True, False
+            self.alt, self.armed = 0.0, False
             self.mission_running = self.flying = self._rtl_descending = False
         elif self.current + 1 < len(self.mission):
             self.current += 1
         else:
             self.mission_running = False  # end of the mission: hold position (PX4: loiter)
         self._send(self.mav.mission_current_encode(self.current, len(self.mission), 0, 0))
+
+    def take_off(self) -> None:
+        """Armed, flying the mission from the current item (what arm + MISSION_START do)."""
+        self.armed = self.flying = self.mission_running = True
+
+    def restart_clock(self, origin: float) -> None:
+        """Make ``origin`` (time.monotonic) simulated time zero and forget the track so far."""
+        self.origin, self._sim_time = origin, 0.0
+        self.trajectory.clear()
+
+    def advance(self, dt: float) -> None:
+        """One step of the flight model, recorded in the trajectory."""
+        self._sim_time += dt
+        self._step(dt)
+        self.trajectory.append((self._sim_time, self.lat, self.lon, self.home[2] + self.alt))
 
     def sim_time(self) -> float:
         """Simulated seconds since ``origin`` (shared by the vehicles of a replay)."""
@@ -551,11 +558,7 @@ class MockAutopilot(asyncio.DatagramProtocol):
             steps = max(1, math.ceil((target - self._sim_time) / 0.5))
             dt = (target - self._sim_time) / steps
             for _ in range(steps):
-                self._sim_time += dt
-                self._step(dt)
-                self.trajectory.append(
-                    (self._sim_time, self.lat, self.lon, self.home[2] + self.alt)
-                )
+                self.advance(dt)
             self._send(
                 self.mav.global_position_int_encode(
                     int(self._sim_time * 1000) & 0xFFFFFFFF,

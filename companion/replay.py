@@ -39,7 +39,15 @@ from protocol.grid import GridSpec
 
 from .autopilot import Autopilot
 from .link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
-from .mission import MissionError, MissionItem, normalise, path_of, segments
+from .mission import (
+    MissionError,
+    MissionItem,
+    ground_offset,
+    normalise,
+    path_of,
+    point_as_segment,
+    segments,
+)
 from .missionfile import read_plan
 from .mock_autopilot import Faults, FlightModel, MockAutopilot
 from .planner import OffsetSettings
@@ -58,7 +66,10 @@ class Tracks:
     paths: dict[int, list[tuple[int, int]]]
 
 
-report_tracks: dict[int, Tracks] = {}  # by id() of the report dict, for plot_report
+@dataclass(frozen=True)
+class Replay:
+    report: dict[str, Any]  # what --json prints
+    tracks: Tracks
 
 
 class ScenarioError(ValueError):
@@ -90,7 +101,6 @@ class Scenario:
     beacon_interval_s: float = 5.0
     grid_radius_m: float = 2000.0
     grid_resolution_mm: int = 500
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -162,16 +172,14 @@ def load_scenario(path: str | Path) -> Scenario:
     )
 
 
-def _free_port() -> int:
+def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
 
 
 def _enu(a: tuple[float, float, float], ref: tuple[float, float]) -> tuple[float, float, float]:
-    north = math.radians(a[0] - ref[0]) * 6_371_000
-    east = math.radians(a[1] - ref[1]) * 6_371_000 * math.cos(math.radians(ref[0]))
-    return north, east, a[2]
+    return (*ground_offset(ref[0], ref[1], a[0], a[1]), a[2])
 
 
 def closest_approach(
@@ -210,18 +218,16 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
         for d in scenario.drones:
             mock = mocks[d.id]
             if d.id not in started and t >= d.takeoff_delay_s:
-                mock.armed = mock.flying = mock.mission_running = True
+                mock.take_off()
                 started.add(d.id)
-            mock._sim_time = t
-            mock._step(dt)
-            mock.trajectory.append((t, mock.lat, mock.lon, mock.home[2] + mock.alt))
+            mock.advance(dt)
         t += dt
         if len(started) == len(mocks) and not any(m.mission_running for m in mocks.values()):
             break
     return {k: m.trajectory for k, m in mocks.items()}
 
 
-async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str, Any]:
+async def run_replay(scenario: Scenario, *, progress: bool = False) -> Replay:
     ts = scenario.time_scale
     clock = Clock(ts)
     medium = SimMedium(Channel(Impairments(loss=scenario.loss), scenario.seed), clock)
@@ -239,7 +245,7 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str,
 
     try:
         for d in scenario.drones:
-            bind, send = _free_port(), _free_port()
+            bind, send = free_udp_port(), free_udp_port()
             mock = MockAutopilot(
                 0,
                 mission=d.mission,
@@ -268,8 +274,7 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str,
             say(f"drone {d.id}: mock autopilot, MAVSDK and companion up")
         origin = time.monotonic()  # simulated time zero: everything is up
         for mock in mocks.values():
-            mock.origin, mock._sim_time = origin, 0.0
-            mock.trajectory.clear()
+            mock.restart_clock(origin)
         started: set[int] = set()
         while True:
             sim = (time.monotonic() - origin) * ts
@@ -282,8 +287,7 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str,
                 waiting = d.id in companions and companions[d.id].comparing
                 if d.id not in started and sim >= d.takeoff_delay_s and not waiting:
                     # a drone about to take off waits for its comparison to finish
-                    mock = mocks[d.id]
-                    mock.armed = mock.flying = mock.mission_running = True
+                    mocks[d.id].take_off()
                     started.add(d.id)
                     say(f"t={sim:.0f} s: drone {d.id} takes off")
             done = len(started) == len(mocks) and not any(m.mission_running for m in mocks.values())
@@ -299,13 +303,14 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> dict[str,
         for mock in mocks.values():
             await mock.stop()
     baseline = _fly_offline(scenario)
-    report = _report(scenario, mocks, companions | vanished, baseline, done)
-    report_tracks[id(report)] = Tracks(
-        {k: m.trajectory for k, m in mocks.items()},
-        baseline,
-        {d.id: path_of(d.mission, ardupilot=d.ardupilot) for d in scenario.drones},
+    return Replay(
+        _report(scenario, mocks, companions | vanished, baseline, done),
+        Tracks(
+            {k: m.trajectory for k, m in mocks.items()},
+            baseline,
+            {d.id: path_of(d.mission, ardupilot=d.ardupilot) for d in scenario.drones},
+        ),
     )
-    return report
 
 
 def _report(
@@ -319,8 +324,9 @@ def _report(
     grid = GridSpec.geo(
         round(first.home[0] * 1e7), round(first.home[1] * 1e7), radius_m=scenario.grid_radius_m
     )
-    paths = {
-        d.id: grid.project_path(path_of(d.mission, ardupilot=d.ardupilot)) for d in scenario.drones
+    paths = {  # a hover is a point, as Bob sends it
+        d.id: point_as_segment(grid.project_path(path_of(d.mission, ardupilot=d.ardupilot)))
+        for d in scenario.drones
     }
     drones, false_alarms = [], 0
     for d in scenario.drones:
@@ -425,14 +431,14 @@ def format_report(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def plot_report(report: dict[str, Any], out: str | Path) -> None:
+def plot_report(replay: Replay, out: str | Path) -> None:
     """PNG: ground tracks with the flagged segments, altitude over time before and after."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    tracks = report_tracks[id(report)]
+    report, tracks = replay.report, replay.tracks
     ref = next(iter(tracks.paths.values()))[0]
 
     def en(lat: float, lon: float) -> tuple[float, float]:

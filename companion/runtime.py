@@ -34,7 +34,14 @@ from .exchange import run_alice, serve_bob
 from .link.arq import LinkError, PeerAborted
 from .link.endpoint import ABORT_REFUSED, LinkEndpoint
 from .link.frames import OVERHEAD
-from .mission import MissionItem, path_of, remaining, vertices
+from .mission import (
+    MissionItem,
+    ground_offset,
+    path_of,
+    point_as_segment,
+    remaining,
+    vertices,
+)
 from .planner import OffsetSettings, PlannerError, plan_offsets
 
 log = logging.getLogger("companion")
@@ -79,10 +86,7 @@ class Event:
 
 
 def _distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
-    lat0 = math.radians(a[0] / 1e7)
-    north = math.radians((b[0] - a[0]) / 1e7) * 6_371_000
-    east = math.radians((b[1] - a[1]) / 1e7) * 6_371_000 * math.cos(lat0)
-    return math.hypot(north, east)
+    return math.hypot(*ground_offset(a[0] / 1e7, a[1] / 1e7, b[0] / 1e7, b[1] / 1e7))
 
 
 def mission_version(items: list[MissionItem], ardupilot: bool) -> int:
@@ -361,8 +365,7 @@ class Companion:
             self.record("budget", peer=peer, error=str(exc))
             return
         _, path = self._remaining_path()
-        if len(path) < 2:
-            path = path + path  # a hovering drone: one zero-length segment at its position
+        path = point_as_segment(path)  # a hovering drone: a point
         try:
             bob = Bob(path, self.bob_keys, geographic=True)
             await serve_bob(self.endpoint, peer, session, bob, timeout=self.settings.run_timeout_s)

@@ -137,11 +137,6 @@ class DutyCycle:
         self._sent: deque[tuple[float, float]] = deque()  # (start, airtime)
         self._used = 0.0
 
-    def used(self, now: float) -> float:
-        """Airtime spent in the window ending at ``now``."""
-        self._expire(now)
-        return self._used
-
     def _expire(self, now: float) -> None:
         while self._sent and self._sent[0][0] <= now - self.window_s + EPSILON:
             self._used -= self._sent.popleft()[1]

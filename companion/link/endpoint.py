@@ -152,7 +152,6 @@ class LinkEndpoint:
         self._aborted: dict[tuple[int, int], Frame] = {}
         self._accept: asyncio.Queue[tuple[int, int]] = asyncio.Queue()
         self._outgoing: dict[tuple[int, int, int], tuple[Outgoing, asyncio.Event]] = {}
-        self._heard: dict[int, float] = {}
         self._timers: dict[int, RetransmissionTimer] = {}
         self._tasks: list[asyncio.Task[None]] = []
         self._running = False
@@ -398,7 +397,6 @@ class LinkEndpoint:
             return  # overheard: another pair's traffic
         self.stats.frames_received += 1
         now = self.clock.now()
-        self._heard[frame.src] = now
         key = (frame.src, frame.session)
         sess = self._sessions.get(key)
         if sess is not None:

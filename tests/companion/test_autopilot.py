@@ -6,7 +6,6 @@ Every test ends with the vehicle holding either the new mission or the old one, 
 from __future__ import annotations
 
 import asyncio
-import socket
 import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -18,16 +17,11 @@ from companion.autopilot import Autopilot, AutopilotError, RolledBack, Timeouts
 from companion.mission import MissionItem, normalise, vertices
 from companion.mock_autopilot import Faults, FlightModel, MockAutopilot, item_message
 from companion.planner import plan_offsets
+from companion.replay import free_udp_port
 
 from .missions import HOME, item, survey
 
 pytestmark = pytest.mark.asyncio
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @asynccontextmanager
@@ -39,7 +33,7 @@ async def vehicle(
     flight: FlightModel | None = None,
     timeouts: Timeouts | None = None,
 ) -> AsyncIterator[tuple[MockAutopilot, Autopilot]]:
-    bind, send = _free_port(), _free_port()
+    bind, send = free_udp_port(), free_udp_port()
     mock = MockAutopilot(
         0,
         mission=mission,
@@ -146,12 +140,12 @@ async def test_a_vanished_autopilot_is_reported_not_waited_on() -> None:
 async def test_no_autopilot_at_all() -> None:
     start = time.monotonic()
     with pytest.raises(AutopilotError, match="no autopilot heard"):
-        await Autopilot.connect(f"udpin://127.0.0.1:{_free_port()}", Timeouts(connect_s=1.0))
+        await Autopilot.connect(f"udpin://127.0.0.1:{free_udp_port()}", Timeouts(connect_s=1.0))
     assert time.monotonic() - start < 5
 
 
 async def test_fence_and_rally_types_are_kept_apart() -> None:
-    mock = MockAutopilot(0, mission=survey(3), bind_port=_free_port(), send_port=_free_port())
+    mock = MockAutopilot(0, mission=survey(3), bind_port=free_udp_port(), send_port=free_udp_port())
     async with mock:
         client = _Client(mock)
         await client.start()
@@ -233,7 +227,7 @@ async def test_simulated_flight_and_an_upload_in_flight() -> None:
     """Arm, start the mission, fly; an upload mid-flight continues at the current item."""
     legs = [item(i, 16, HOME[0] + 0.0005 * i, HOME[1], 20.0) for i in range(4)]
     mock = MockAutopilot(
-        0, mission=legs, flight=FAST, bind_port=_free_port(), send_port=_free_port()
+        0, mission=legs, flight=FAST, bind_port=free_udp_port(), send_port=free_udp_port()
     )
     async with mock:
         client = await _flying(mock)
@@ -300,7 +294,7 @@ async def test_takeoff_rtl_and_land_items_are_flown() -> None:
         item(3, 20, frame=2),  # RTL: back over home and land
     ]
     mock = MockAutopilot(
-        0, mission=legs, flight=FAST, bind_port=_free_port(), send_port=_free_port()
+        0, mission=legs, flight=FAST, bind_port=free_udp_port(), send_port=free_udp_port()
     )
     async with mock:
         client = await _flying(mock)
