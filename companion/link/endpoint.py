@@ -382,6 +382,8 @@ class LinkEndpoint:
         while True:
             await self.clock.sleep(max(self.idle_timeout / 4, 1.0))
             now = self.clock.now()
+            for peer, session in self._sessions:
+                self.receiver.touch(peer, session, now)  # open: keep what it delivered
             self.receiver.expire(now)
             for key in [k for k, t in self._closed.items() if now - t > self.idle_timeout]:
                 del self._closed[key]
@@ -401,6 +403,9 @@ class LinkEndpoint:
         sess = self._sessions.get(key)
         if sess is not None:
             sess.last_heard = now
+        # Any frame of the session (an ACK of our message too) shows the peer is still in it:
+        # the receiver must go on recognising copies of what it already delivered.
+        self.receiver.touch(frame.src, frame.session, now)
         if frame.type in (FrameType.DATA, FrameType.POLL) and key in self._aborted:
             if frame.type is FrameType.POLL or frame.flags & Flag.ACK_REQ:
                 self._enqueue(self._aborted[key], control=True)

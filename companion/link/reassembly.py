@@ -1,10 +1,26 @@
 """Receiving side of the link: reassembly, duplicate suppression, acknowledgements (pure).
 
 Fragments are stored as they arrive (nothing is allocated from a claimed size), so a forged
-``count`` costs nothing.  A message is delivered once, when its last missing fragment arrives;
-later copies of its fragments or polls are answered with a COMPLETE acknowledgement from a
-short memory of finished messages.  Partial messages that hear nothing for ``idle_timeout``
-seconds are dropped and their memory freed.
+``count`` costs nothing.  A message is delivered once, when its last missing fragment arrives.
+Partial messages that hear nothing for ``idle_timeout`` seconds are dropped and their memory
+freed.
+
+Delivery is at most once and in order per *stream* (source, session): a sender has one
+message of a session in flight at a time and numbers them (``seq``, mod 256), so the receiver
+remembers, per stream, the last message it delivered.  Later copies of that message's
+fragments, and polls for it, are answered with a COMPLETE acknowledgement; anything of an
+older message is stale (its sender has finished with it) and ignored.  A stream is remembered
+while its session is alive -- every frame of the session, in either direction's traffic,
+renews it (:meth:`Receiver.touch`) -- and ``idle_timeout`` after that, not per message: a
+sender can stay silent about an unacknowledged message for longer than the idle timeout while
+the session is busy with the peer's long reply, and a receiver that forgot the message then
+would take its next probe for a new copy and deliver the message a second time.
+
+Each partial copy of a message is named by an *epoch* in its ACKs, and a copy dropped and begun
+again must show a new one, or its sender trusts its stale acknowledgements, takes the message
+for complete and it is lost.  Epochs therefore count round (from a random start, for a
+restarted receiver) instead of being drawn at random per copy, which repeated the previous
+epoch once in 255 restarts.
 """
 
 from __future__ import annotations
@@ -15,6 +31,8 @@ from dataclasses import dataclass, field
 from .frames import AckInfo, Flag, Frame, FrameType
 
 Key = tuple[int, int, int]  # (source node, session, message seq)
+StreamKey = tuple[int, int]  # (source node, session)
+SEQ_MOD = 256  # ``seq`` is a u8 on the wire
 
 
 @dataclass(frozen=True, slots=True)
@@ -29,9 +47,18 @@ class Delivered:
 class _Partial:
     count: int
     last_heard: float
-    epoch: int = field(default_factory=lambda: secrets.randbelow(255) + 1)
+    epoch: int
     fragments: dict[int, bytes] = field(default_factory=dict)
     size: int = 0
+
+
+@dataclass
+class _Stream:
+    """The last message delivered from one (source, session): earlier ones are finished."""
+
+    seq: int
+    count: int
+    last_heard: float
 
 
 @dataclass
@@ -62,7 +89,8 @@ class Receiver:
         self.idle_timeout = idle_timeout
         self.stats = ReceiverStats()
         self._partial: dict[Key, _Partial] = {}
-        self._done: dict[Key, tuple[int, float]] = {}  # key -> (count, finished at)
+        self._streams: dict[StreamKey, _Stream] = {}
+        self._epoch = secrets.randbelow(255) + 1  # of the last partial copy begun
 
     @property
     def buffered_bytes(self) -> int:
@@ -74,15 +102,19 @@ class Receiver:
     def on_frame(self, frame: Frame, now: float) -> tuple[Delivered | None, Frame | None]:
         """Consume one DATA or POLL frame; return (message completed, ACK frame to send)."""
         key = (frame.src, frame.session, frame.seq)
-        if key in self._done:
-            count, _ = self._done[key]
-            self._done[key] = (count, now)
-            if frame.type is FrameType.DATA:
-                self.stats.duplicates += 1
-            if frame.count != count:
-                self.stats.refuse("inconsistent")
-                return None, None
-            return None, self._ack(frame, AckInfo(count), Flag.COMPLETE)
+        stream = self._streams.get(key[:2])
+        if stream is not None:
+            stream.last_heard = now
+            age = (stream.seq - frame.seq) % SEQ_MOD
+            if age < SEQ_MOD // 2:  # the last delivered message (age 0) or an older one
+                if frame.type is FrameType.DATA:
+                    self.stats.duplicates += 1
+                if age:
+                    return None, None  # stale: its sender finished it before sending the last
+                if frame.count != stream.count:
+                    self.stats.refuse("inconsistent")
+                    return None, None
+                return None, self._ack(frame, AckInfo(stream.count), Flag.COMPLETE)
         partial = self._partial.get(key)
         if frame.type is FrameType.POLL:
             if partial is None:
@@ -100,7 +132,7 @@ class Receiver:
             if len(self._partial) >= self.max_partial:
                 self.stats.refuse("too_many_partial")
                 return None, None
-            partial = self._partial[key] = _Partial(frame.count, now)
+            partial = self._partial[key] = _Partial(frame.count, now, self._next_epoch())
         if frame.count != partial.count:
             self.stats.refuse("inconsistent")
             return None, None
@@ -118,13 +150,21 @@ class Receiver:
         if len(partial.fragments) == partial.count:
             del self._partial[key]
             data = b"".join(partial.fragments[i] for i in range(partial.count))
-            self._done[key] = (partial.count, now)
+            self._streams[key[:2]] = _Stream(frame.seq, partial.count, now)
+            for older in [k for k in self._partial if k[:2] == key[:2]]:
+                del self._partial[older]  # abandoned by its sender (it moved on): stale
             self.stats.delivered += 1
             delivered = Delivered(frame.src, frame.session, frame.seq, data)
             return delivered, self._ack(frame, AckInfo(partial.count), Flag.COMPLETE)
         if frame.flags & Flag.ACK_REQ:
             return None, self._ack(frame, self._info(partial))
         return None, None
+
+    def _next_epoch(self) -> int:
+        """Epochs go round 1..255 (0 means "holds none"), so a copy begun again differs from
+        the copy before unless a multiple of 255 other copies were begun in between."""
+        self._epoch = self._epoch % 255 + 1
+        return self._epoch
 
     @staticmethod
     def _info(partial: _Partial) -> AckInfo:
@@ -143,19 +183,27 @@ class Receiver:
             flags,
         )
 
+    def touch(self, src: int, session: int, now: float) -> None:
+        """The session with ``src`` is alive (a frame of it was heard, or it is open): keep
+        remembering what it delivered."""
+        stream = self._streams.get((src, session))
+        if stream is not None:
+            stream.last_heard = max(stream.last_heard, now)
+
     def expire(self, now: float) -> int:
-        """Free partial messages idle for ``idle_timeout`` and forget old finished ones."""
+        """Free partial messages idle for ``idle_timeout`` and forget streams whose session
+        was silent that long; returns the number of partial messages freed."""
         stale = [k for k, p in self._partial.items() if now - p.last_heard >= self.idle_timeout]
         for key in stale:
             del self._partial[key]
         self.stats.expired += len(stale)
-        old = [k for k, (_, t) in self._done.items() if now - t >= self.idle_timeout]
-        for key in old:
-            del self._done[key]
+        old = [k for k, t in self._streams.items() if now - t.last_heard >= self.idle_timeout]
+        for stream_key in old:
+            del self._streams[stream_key]
         return len(stale)
 
     def forget_session(self, src: int, session: int) -> None:
-        """Free the partial messages of a session that ended or was aborted.  Finished
-        messages stay remembered (a few bytes each) so late polls still get COMPLETE."""
+        """Free the partial messages of a session that ended or was aborted.  What it
+        delivered stays remembered (a few bytes) so late polls still get COMPLETE."""
         for key in [k for k in self._partial if k[:2] == (src, session)]:
             del self._partial[key]

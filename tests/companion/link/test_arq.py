@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from companion.link import reassembly
 from companion.link.arq import LinkTimeout, MessageTooLarge, Outgoing
 from companion.link.frames import Flag, Frame, FrameType, decode_frame
 from companion.link.reassembly import Receiver
@@ -153,3 +154,78 @@ def test_a_receiver_that_lost_the_message_gets_it_again() -> None:
     for frame in out.burst():
         message, ack = fresh.on_frame(frame, 4.0)
     assert message is not None and message.data == bytes(500)
+
+
+def test_a_delivered_message_is_remembered_while_its_session_is_alive() -> None:
+    """The sender may stay silent about an unacknowledged message for longer than the idle
+    timeout (its peer is busy sending a long reply in the session).  Its next probe must get
+    COMPLETE, not open a new copy that would deliver the message a second time."""
+    receiver = Receiver(2, idle_timeout=10.0)
+    out = Outgoing(1, 2, 7, 0, bytes(500), 100)
+    for frame in out.burst():
+        message, ack = receiver.on_frame(frame, 0.0)
+    assert message is not None  # the COMPLETE ack is lost
+    for now in (8.0, 16.0, 24.0):
+        receiver.touch(1, 7, now)  # other frames of session 7 (e.g. ACKs of the reply)
+        receiver.expire(now)
+    message, ack = receiver.on_frame(out.probe(), 30.0)  # the sender polls at last
+    assert message is None and ack is not None and ack.flags & Flag.COMPLETE
+    message, ack = receiver.on_frame(out._data(4, Flag.ACK_REQ), 31.0)
+    assert message is None and ack is not None and ack.flags & Flag.COMPLETE
+    assert receiver.pending() == 0
+    receiver.expire(41.0)  # a session silent for the idle timeout is forgotten
+    message, ack = receiver.on_frame(out._data(4, Flag.ACK_REQ), 42.0)
+    assert message is None and ack is not None and not ack.flags & Flag.COMPLETE
+
+
+def test_delivery_is_in_order_and_older_messages_are_stale() -> None:
+    receiver = Receiver(2)
+    first = Outgoing(1, 2, 7, 0, bytes(300), 100)
+    second = Outgoing(1, 2, 7, 1, b"second", 100)
+    third = Outgoing(1, 2, 7, 2, b"third", 100)
+    a, b, c = first.burst()
+    receiver.on_frame(a, 0.0)  # the sender gave up on message 0 (cancelled) ...
+    (frame,) = second.burst()
+    message, _ = receiver.on_frame(frame, 1.0)  # ... and sent message 1
+    assert message is not None and message.data == b"second"
+    assert receiver.pending() == 0  # message 0 is stale now: its partial copy is freed
+    for frame in (b, c, a):
+        assert receiver.on_frame(frame, 2.0) == (None, None)  # never delivered out of order
+    message, ack = receiver.on_frame(second.probe(), 3.0)
+    assert message is None and ack is not None and ack.flags & Flag.COMPLETE
+    (frame,) = third.burst()
+    message, _ = receiver.on_frame(frame, 4.0)
+    assert message is not None and message.data == b"third"
+    assert receiver.on_frame(Frame(FrameType.POLL, 1, 2, 7, 1, 0, 1), 5.0) == (None, None)
+
+
+def test_sequence_numbers_wrap_around() -> None:
+    receiver = Receiver(2)
+    got = []
+    for n in range(600):
+        (frame,) = Outgoing(1, 2, 7, n % 256, n.to_bytes(2, "big"), 100).burst()
+        message, ack = receiver.on_frame(frame, float(n))
+        assert message is not None and ack is not None and ack.flags & Flag.COMPLETE
+        got.append(int.from_bytes(message.data, "big"))
+        assert receiver.on_frame(frame, float(n))[0] is None  # a copy is not delivered again
+    assert got == list(range(600))
+
+
+def test_a_copy_begun_again_never_reuses_the_epoch(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Epochs were drawn at random per copy: once in 255 restarts the new copy had the old
+    epoch, the sender trusted its stale acknowledgements and the message was lost."""
+    monkeypatch.setattr(reassembly.secrets, "randbelow", lambda n: 41)  # every draw the same
+    receiver = Receiver(2, idle_timeout=10.0)
+    out = Outgoing(1, 2, 7, 0, bytes(range(250)) * 2, 100)
+    for frame in out.burst()[:4]:
+        receiver.on_frame(frame, 0.0)
+    _, ack = receiver.on_frame(out.probe(), 1.0)
+    assert ack is not None and out.on_ack(ack)
+    assert out.acked == [True, True, True, True, False]
+    assert receiver.expire(11.0) == 1  # the copy is dropped (the sender was silent) ...
+    message, ack = receiver.on_frame(out.burst()[0], 12.0)  # ... and begun again
+    assert message is None and ack is not None and out.on_ack(ack)
+    assert out.restarts == 1 and not out.complete  # the sender saw the new epoch
+    for frame in out.burst():
+        message, ack = receiver.on_frame(frame, 13.0)
+    assert message is not None and message.data == bytes(range(250)) * 2

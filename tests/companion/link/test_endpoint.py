@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+from collections.abc import Callable
 
 import pytest
 
@@ -23,6 +24,8 @@ from companion.link import (
     run_simulated,
 )
 from companion.link.endpoint import ABORT_PROTOCOL
+from companion.link.frames import FrameType, decode_frame
+from companion.link.medium import SimTransport
 
 from .helpers import pair
 
@@ -245,5 +248,78 @@ def test_an_aborted_session_answers_late_requests_with_abort() -> None:
             p.b._control.clear()  # the three copies never make it to the air
             with pytest.raises(PeerAborted, match="bad message"):
                 await p.a.send(2, session, b"more")
+
+    run_simulated(main())
+
+
+class Blackout:
+    """A transport that does not hear the frames ``lost(frame, now)`` picks."""
+
+    def __init__(self, inner: SimTransport, lost: Callable[[bytes, float], bool]) -> None:
+        self.inner, self.lost = inner, lost
+
+    def set_receiver(self, callback: Callable[[bytes], None]) -> None:
+        clock = self.inner.medium.clock
+
+        def hear(frame: bytes) -> None:
+            if not self.lost(frame, clock.now()):
+                callback(frame)
+
+        self.inner.set_receiver(hear)
+
+    async def transmit(self, frame: bytes, airtime: float) -> None:
+        await self.inner.transmit(frame, airtime)
+
+    async def close(self) -> None:
+        await self.inner.close()
+
+
+def test_a_message_is_not_delivered_twice_when_its_ack_is_lost_past_the_idle_timeout() -> None:
+    """The interleaving behind "expected message type GATES, got 4" at 30 % loss.
+
+    b sends a one-fragment message; a delivers it, but every COMPLETE acknowledgement and every
+    probe of that message is lost for longer than the link's idle timeout, while a sends a
+    reply and b acknowledges it (the session is busy all along).  a must still recognise the
+    message when b's probe finally gets through: answer COMPLETE, not start a new copy (a new
+    epoch would make b send it all again and a deliver it a second time)."""
+    idle = 20.0
+    window: list[float] = []  # [start, end] of the blackout, once the message was delivered
+
+    def blacked_out(frame: bytes, now: float) -> bool:
+        head = decode_frame(frame)
+        if not window or not window[0] <= now < window[1] or head.seq != 0:
+            return False
+        # b's copies and probes of its message 0, and a's acknowledgements of it
+        return (head.src, head.type) in ((2, FrameType.DATA), (1, FrameType.ACK))
+
+    async def main() -> None:
+        clock = Clock()
+        medium = SimMedium(Channel(seed=1), clock)
+        config = LinkConfig(idle_timeout_s=idle)
+        a = LinkEndpoint(
+            1, Blackout(medium.attach(1), blacked_out), PROFILES["us915-sf7"], config, clock
+        )
+        b = LinkEndpoint(
+            2, Blackout(medium.attach(2), blacked_out), PROFILES["us915-sf7"], config, clock
+        )
+        async with a, b:
+            session = a.open(2)
+
+            async def bob() -> None:
+                peer, sess = await b.accept()
+                assert await b.receive(peer, sess) == b"ping"
+                await b.send(peer, sess, b"pong")  # returns once a's COMPLETE gets through
+                assert await b.receive(peer, sess, idle_timeout=600) == bytes(8000)
+                await b.send(peer, sess, b"done")
+
+            task = asyncio.create_task(bob())
+            await a.send(2, session, b"ping")
+            assert await a.receive(2, session) == b"pong"
+            window[:] = [clock.now(), clock.now() + 3 * idle]
+            await a.send(2, session, bytes(8000))  # 39 fragments, some 14 s on the air
+            assert await a.receive(2, session, idle_timeout=600) == b"done"
+            await task
+            assert a.stats.messages_received == 2
+            assert clock.now() > window[1]  # the blackout outlasted the idle timeout
 
     run_simulated(main())
