@@ -142,6 +142,14 @@ class Autopilot:
                 log.warning("%s failed (attempt %d): %s", what, attempt + 1, exc)
         raise AutopilotError(f"{what} failed: {last}") from last
 
+    async def pause(self) -> None:
+        """Hold position (PX4: AUTO.LOITER, ArduPilot: LOITER), the mission kept."""
+        await self._call("mission pause", self.mission_raw.pause_mission)
+
+    async def resume(self) -> None:
+        """Continue the mission from the current item."""
+        await self._call("mission start", self.mission_raw.start_mission)
+
     async def download(self) -> list[MissionItem]:
         """The vehicle's mission, normalised (seq 0..n-1, one current item)."""
         raw = await self._call("mission download", self.mission_raw.download_mission)

@@ -3,24 +3,25 @@
 ::
 
     version u8 | flags u8 | suites u8 | lat i32 (degE7) | lon i32 | alt i16 (m AMSL)
-    | mission_version u16 | key fingerprint 8 B
+    | mission_version u16 | levels u8 | instance 8 B
 
-25 bytes, one frame at every profile.  ``flags`` bit 0: on the ground (about to take off).
+24 bytes, one frame at every profile.  ``flags`` bit 0: on the ground (about to take off).
 The position is coarse operational information of the kind Remote ID broadcasts anyway; the
-*path* is never in a beacon.  The fingerprint (SHA-256 of the drone's public keys, 8 bytes)
-lets a peer bind a session to the keys it heard announced.
+*path* is never in a beacon.  ``levels``: bit L set if the drone flies some of its remaining
+path L offsets above its plan (:mod:`companion.levels`) -- its altitude shows that anyway.
+``instance`` is random per companion start: a peer whose instance changed has lost the OT
+setups it shared with us, so we drop ours (identities and signatures: a later issue).
 """
 
 from __future__ import annotations
 
-import hashlib
 import struct
 from dataclasses import dataclass
 
 from protocol.wire import Suite
 
-VERSION = 1
-_FORMAT = struct.Struct(">BBBiihH8s")
+VERSION = 2
+_FORMAT = struct.Struct(">BBBiihHB8s")
 SIZE = _FORMAT.size
 ON_GROUND = 0x01
 
@@ -37,7 +38,8 @@ class Beacon:
     on_ground: bool
     suites: frozenset[Suite]
     mission_version: int
-    fingerprint: bytes
+    instance: bytes
+    levels: int = 0
 
     def encode(self) -> bytes:
         mask = 0
@@ -52,24 +54,26 @@ class Beacon:
             self.lon,
             max(-32768, min(32767, self.alt_m)),
             self.mission_version & 0xFFFF,
-            self.fingerprint,
+            self.levels & 0xFF,
+            self.instance,
         )
 
     @classmethod
     def decode(cls, data: bytes) -> Beacon:
         if len(data) != SIZE:
             raise BeaconError(f"beacon of {len(data)} bytes, expected {SIZE}")
-        version, flags, mask, lat, lon, alt, mission_version, fingerprint = _FORMAT.unpack(data)
+        fields = _FORMAT.unpack(data)
+        version, flags, mask, lat, lon, alt, mission_version, levels, instance = fields
         if version != VERSION or flags & ~ON_GROUND or mask == 0 or mask & ~0b11:
             raise BeaconError("unknown beacon version, flags or suites")
+        if levels & 1:
+            raise BeaconError("level 0 is not a climb")
         if abs(lat) > 900_000_000 or abs(lon) > 1_800_000_000:
             raise BeaconError("beacon position out of range")
         suites = frozenset(s for s in Suite if mask >> (s - 1) & 1)
-        return cls(lat, lon, alt, bool(flags & ON_GROUND), suites, mission_version, fingerprint)
-
-
-def fingerprint(public_keys: bytes) -> bytes:
-    return hashlib.sha256(b"deconfliction-keys-v1" + public_keys).digest()[:8]
+        return cls(
+            lat, lon, alt, bool(flags & ON_GROUND), suites, mission_version, instance, levels
+        )
 
 
 def alice_of(a: tuple[bool, int], b: tuple[bool, int]) -> int:

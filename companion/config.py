@@ -5,6 +5,7 @@
     node = 1
     autopilot = "udpin://0.0.0.0:14540"   # MAVSDK URL; PX4 SITL instance i: 14540 + i
     ardupilot = false
+    suite = "compact"                     # or "paper" (Paillier + DGK, the paper's design)
     log_level = "info"
     [link]
     transport = "udp"                     # "udp" (a link hub) or "serial" (a LoRa modem)
@@ -17,10 +18,15 @@
     direction = "up"
     max_altitude_m = 120.0
     [limits]
-    max_runs_per_peer = 6
+    max_runs_per_peer = 8
     run_timeout_s = 900.0
     beacon_interval_s = 10.0
     initiation_range_m = 5000.0
+    lookahead_s = 60.0                    # compare at least the next 60 s of flight first
+    grid_radius_m = 500.0                 # smallest comparison box (doubled to hold the path)
+    [failsafe]
+    action = "climb"                      # "climb", "hold" or "off"
+    margin_s = 10.0
 """
 
 from __future__ import annotations
@@ -30,6 +36,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from protocol.wire import Suite
+
+from .failsafe import Action, FailsafeSettings
 from .link.airtime import profile as link_profile
 from .planner import OffsetSettings
 from .runtime import CompanionSettings
@@ -83,6 +92,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     link = doc.get("link", {})
     offset = doc.get("offset", {})
     limits = doc.get("limits", {})
+    failsafe = doc.get("failsafe", {})
     node = _get(doc, "node", int, None) if "node" in doc else None
     if node is None or not 1 <= node < 0xFFFF:
         raise ConfigError("node: a node id 1..65534 is required")
@@ -108,15 +118,38 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         )
     except ValueError as exc:
         raise ConfigError(f"offset: {exc}") from None
+    suites = {s.label: s for s in Suite}
+    suite = _get(doc, "suite", str, "compact")
+    if suite not in suites:
+        raise ConfigError(f"suite: one of {', '.join(suites)}")
+    actions = {a.value: a for a in Action}
+    action = _get(failsafe, "action", str, "climb")
+    if action not in actions:
+        raise ConfigError(f"failsafe.action: one of {', '.join(actions)}")
+    numbers = {
+        "beacon_interval_s": _get(limits, "beacon_interval_s", float, 10.0),
+        "initiation_range_m": _get(limits, "initiation_range_m", float, 5000.0),
+        "run_timeout_s": _get(limits, "run_timeout_s", float, 900.0),
+        "lookahead_s": _get(limits, "lookahead_s", float, 60.0),
+        "grid_radius_m": _get(limits, "grid_radius_m", float, 500.0),
+        "margin_s": _get(failsafe, "margin_s", float, 10.0),
+    }
+    for key, value in numbers.items():
+        if value < 0 or (key != "lookahead_s" and value == 0):
+            raise ConfigError(f"{key}: must be positive")
     companion = CompanionSettings(
         node=node,
         autopilot_url=_get(doc, "autopilot", str, "udpin://0.0.0.0:14540"),
         ardupilot=_get(doc, "ardupilot", bool, False),
+        suite=suites[suite],
         offset=offset_settings,
-        beacon_interval_s=_get(limits, "beacon_interval_s", float, 10.0),
-        initiation_range_m=_get(limits, "initiation_range_m", float, 5000.0),
-        max_runs_per_peer=_get(limits, "max_runs_per_peer", int, 6),
-        run_timeout_s=_get(limits, "run_timeout_s", float, 900.0),
+        beacon_interval_s=numbers["beacon_interval_s"],
+        initiation_range_m=numbers["initiation_range_m"],
+        grid_radius_m=numbers["grid_radius_m"],
+        max_runs_per_peer=_get(limits, "max_runs_per_peer", int, 8),
+        run_timeout_s=numbers["run_timeout_s"],
+        lookahead_s=numbers["lookahead_s"],
+        failsafe=FailsafeSettings(actions[action], numbers["margin_s"]),
     )
     return Config(
         companion,

@@ -12,6 +12,7 @@ or :class:`~companion.link.PeerAborted`.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
@@ -22,6 +23,7 @@ from protocol.errors import ProtocolError
 from protocol.intersection import Alice, Bob, State
 
 from .link.arq import LinkError, LinkTimeout, PeerAborted
+from .link.clock import VirtualTimeLoop
 from .link.endpoint import (
     ABORT_LINK,
     ABORT_PROTOCOL,
@@ -31,6 +33,9 @@ from .link.endpoint import (
 )
 
 T = TypeVar("T")
+# Protocol steps get threads of their own: MAVSDK's blocking calls and streams occupy the
+# event loop's default pool, and a step queued behind them would wait for seconds.
+_WORKERS = concurrent.futures.ThreadPoolExecutor(max_workers=2, thread_name_prefix="protocol")
 
 
 @dataclass
@@ -66,13 +71,27 @@ class _Party:
         self.machine, self.report, self.charge_cpu = machine, report, charge_cpu
 
     async def compute(self, step: Callable[[], T]) -> T:
-        """Run one machine step; on a virtual clock its CPU time also passes as link time."""
-        start = time.process_time()
-        result = step()
-        spent = time.process_time() - start
+        """Run one machine step.  On a virtual clock it runs inline and its CPU time passes as
+        link time; in real time it runs in a worker thread, so the radio (and the autopilot's
+        MAVSDK) keep being served while it computes."""
+        loop = asyncio.get_running_loop()
+        if self.charge_cpu or isinstance(loop, VirtualTimeLoop):
+            # Virtual time must not run ahead of a worker thread: compute inline.
+            start = time.process_time()
+            result = step()
+            spent = time.process_time() - start
+            self.report.cpu_s += spent
+            if self.charge_cpu:
+                await self.endpoint.clock.sleep(spent)
+            return result
+
+        def timed() -> tuple[T, float]:
+            start = time.thread_time()
+            out = step()
+            return out, time.thread_time() - start
+
+        result, spent = await loop.run_in_executor(_WORKERS, timed)
         self.report.cpu_s += spent
-        if self.charge_cpu:
-            await self.endpoint.clock.sleep(spent)
         return result
 
     async def send(self, data: bytes) -> None:
@@ -145,14 +164,17 @@ async def serve_bob(
     *,
     timeout: float | None = None,
     charge_cpu: bool = False,
+    first: bytes | None = None,
 ) -> RunReport:
-    """Answer the session ``peer`` opened (its first message waits in the inbox)."""
+    """Answer the session ``peer`` opened (its first message waits in the inbox, or was
+    taken from it already and is passed as ``first``)."""
     report = RunReport("bob", peer, session, endpoint.clock.now())
     party = _Party(endpoint, peer, session, bob, report, charge_cpu)
+    pending = [first] if first is not None else []
 
     async def run() -> None:
         while bob.state is not State.DONE:
-            message = await endpoint.receive(peer, session)
+            message = pending.pop() if pending else await endpoint.receive(peer, session)
             reply = await party.compute(partial(bob.receive, message))
             if reply is not None:
                 await party.send(reply)

@@ -132,6 +132,7 @@ class MockAutopilot(asyncio.DatagramProtocol):
         self.armed = False
         self.flying = False
         self.mission_running = False
+        self.holding = False  # paused in flight (hold / loiter mode)
         self.trajectory: list[tuple[float, float, float, float]] = []
         self.uploads_accepted = 0
         self.received: dict[str, int] = {}
@@ -412,7 +413,9 @@ class MockAutopilot(asyncio.DatagramProtocol):
                 result = mavlink.MAV_RESULT_DENIED
             else:
                 self.mission_running = self.flying = True
-        elif command not in (mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL):
+        elif command == mavlink.MAV_CMD_DO_SET_MODE:
+            result = self._set_mode(m)
+        elif command != mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             result = mavlink.MAV_RESULT_UNSUPPORTED
         self._send(
             self.mav.command_ack_encode(
@@ -420,6 +423,22 @@ class MockAutopilot(asyncio.DatagramProtocol):
             ),
             reply=True,
         )
+
+    def _set_mode(self, m: Any) -> int:
+        """Hold (PX4 AUTO.LOITER, ArduPilot LOITER/BRAKE) pauses the mission where the vehicle
+        is; mission mode (PX4 AUTO.MISSION, ArduPilot AUTO) resumes it.  Others: accepted."""
+        if self.ardupilot:
+            hold, resume = int(m.param2) in (5, 17), int(m.param2) == 3
+        else:
+            main, sub = int(m.param2), int(m.param3)
+            hold, resume = (main, sub) == (4, 3), (main, sub) == (4, 4)
+        if hold and self.flying:
+            self.mission_running = False
+            self.holding = True
+        elif resume and self.armed and self.mission:
+            self.mission_running = self.flying = True
+            self.holding = False
+        return int(mavlink.MAV_RESULT_ACCEPTED)
 
     def _autopilot_version(self) -> None:
         caps = (

@@ -79,7 +79,6 @@ async def _run(
         "bytes_alice_to_bob": report.bytes_sent,
         "bytes_bob_to_alice": bob_report.bytes_sent,
         "messages": report.messages_sent + bob_report.messages_sent,
-        "round_trips": (report.messages_sent + bob_report.messages_sent) / 2,
         "cpu_s_alice": report.cpu_s,
         "cpu_s_bob": bob_report.cpu_s,
         "frames_sent": sum(s.frames_sent for s in stats),
@@ -217,7 +216,8 @@ def _duration(seconds: float) -> str:
 def format_link(result: dict[str, Any]) -> str:
     lines = [
         f"Link benchmark, suite {result['suite']}: medians per run; a paper pair is one "
-        f"1 x 1 comparison (keys included), {result['rows'][1]['workload']} one run "
+        f"1 x 1 comparison (keys included; the compact suite's one-time OT setup made before, "
+        f"as between drones that met), {result['rows'][1]['workload']} one run "
         f"(range +-{result['grid_range']}).",
         "",
         "| profile | frame B | header share of airtime | duty cycle | dwell |",

@@ -1,17 +1,19 @@
 """Altitude-offset planner (pure): fly the flagged segments higher (or lower), nothing else.
 
 Segment k joins vertices k and k+1 (:func:`companion.mission.vertices`).  Every vertex of a
-flagged segment is moved by the offset, in the item's own frame (relative, AMSL or terrain:
-a metre is a metre in each).  The item count, the ground track and every item without a
-position stay exactly as they were; ArduPilot's home is never touched.  So the leg before a
-flagged run climbs, the flagged run is flown at the offset altitude, and the first unflagged
-leg after it descends back to the planned altitude.  A limit the offset would break is an
-error, never a silent clip.
+flagged segment is moved by the offset times the segment's *level* (1 unless several drones
+share the airspace, see :mod:`companion.levels`; a vertex between two flagged segments takes
+the higher level), in the item's own frame (relative, AMSL or terrain: a metre is a metre in
+each).  The item count, the ground track and every item without a position stay exactly as
+they were; ArduPilot's home is never touched.  So the leg before a flagged run climbs, the
+flagged run is flown at the offset altitude, and the first unflagged leg after it descends
+back to the planned altitude.  A limit the offset would break is an error, never a silent
+clip.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from .mission import FRAMES_AMSL, MissionError, MissionItem, vertices
@@ -42,22 +44,29 @@ class OffsetSettings:
 
 def plan_offsets(
     items: Sequence[MissionItem],
-    flagged: Iterable[int],
+    flagged: Iterable[int] | Mapping[int, int],
     settings: OffsetSettings | None = None,
     *,
     ardupilot: bool = False,
 ) -> list[MissionItem]:
-    """The edited mission: the vertices of every flagged segment moved by the offset."""
+    """The edited mission: the vertices of every flagged segment moved by the offset (times
+    the segment's level when ``flagged`` maps segments to levels)."""
     settings = settings or OffsetSettings()
     v = vertices(items, ardupilot=ardupilot)
-    flagged = sorted(set(flagged))
-    if flagged and not 0 <= flagged[0] <= flagged[-1] < len(v) - 1:
-        raise PlannerError(f"segments {flagged} outside 0..{len(v) - 2}")
-    moved = {v[k] for k in flagged} | {v[k + 1] for k in flagged}
+    levels = dict(flagged) if isinstance(flagged, Mapping) else dict.fromkeys(flagged, 1)
+    segments = sorted(levels)
+    if segments and not 0 <= segments[0] <= segments[-1] < len(v) - 1:
+        raise PlannerError(f"segments {segments} outside 0..{len(v) - 2}")
+    if any(level < 1 for level in levels.values()):
+        raise PlannerError("levels start at 1")
+    moved: dict[int, int] = {}
+    for k, level in levels.items():
+        for index in (v[k], v[k + 1]):
+            moved[index] = max(moved.get(index, 0), level)
     out = list(items)
     for index in sorted(moved):
         item = items[index]
-        z = item.z + settings.delta
+        z = item.z + settings.delta * moved[index]
         if item.frame in FRAMES_AMSL:
             limit = settings.max_altitude_amsl_m
             if limit is not None and z > limit:

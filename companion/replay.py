@@ -5,6 +5,8 @@
     time_scale = 20          # simulated seconds per real second
     time_limit_s = 900       # simulated
     offset_m = 10            # optional
+    lookahead_s = 60         # optional: the near run covers at least this much flight
+    failsafe = "climb"       # optional: "climb", "hold" or "off"
     [link]
     profile = "us915-sf7"
     loss = 0.1
@@ -14,6 +16,7 @@
     mission = "a.plan"       # relative to the scenario file
     takeoff_delay_s = 0      # optional
     autopilot = "px4"        # or "ardupilot"
+    hold_for_comparisons = true  # optional: take-off waits for a comparison under way
 
 Each drone gets a :class:`~companion.mock_autopilot.MockAutopilot` on loopback UDP, a
 :class:`~companion.autopilot.Autopilot` (MAVSDK) and a :class:`~companion.runtime.Companion`
@@ -38,6 +41,7 @@ from protocol.geometry import path_hits
 from protocol.grid import GridSpec
 
 from .autopilot import Autopilot
+from .failsafe import Action, FailsafeSettings
 from .link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
 from .mission import (
     MissionError,
@@ -53,7 +57,8 @@ from .mock_autopilot import Faults, FlightModel, MockAutopilot
 from .planner import OffsetSettings
 from .runtime import Companion, CompanionSettings
 
-KINEMATIC_TOLERANCE_M = 2.0
+RESOLVED_TOLERANCE_M = 0.5  # a pair is resolved at the offset minus this
+REPORT_RADIUS_M = 50_000.0  # the report's own grid (plain predicate only): any encounter fits
 Track = list[tuple[float, float, float, float]]
 
 
@@ -85,6 +90,7 @@ class DroneSpec:
     ardupilot: bool = False
     faults: Faults = field(default_factory=Faults)  # of its mock autopilot
     companion_stop_s: float | None = None  # the companion vanishes at this simulated time
+    hold_for_comparisons: bool = True  # on the ground, take-off waits for a running run
 
 
 @dataclass(frozen=True)
@@ -99,8 +105,10 @@ class Scenario:
     offset_m: float = 10.0
     cruise_m_s: float = 10.0
     beacon_interval_s: float = 5.0
-    grid_radius_m: float = 2000.0
+    grid_radius_m: float = 500.0
     grid_resolution_mm: int = 500
+    lookahead_s: float = 60.0
+    failsafe: Action = Action.CLIMB
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -153,9 +161,22 @@ def load_scenario(path: str | Path) -> Scenario:
                 0, 0, 16, 0, 1, 0, 0, 0, 0, round(home3[0] * 1e7), round(home3[1] * 1e7), home3[2]
             )
             items = normalise([home_item, *items])
+        hold = raw.get("hold_for_comparisons", True)
+        if not isinstance(hold, bool):
+            raise ScenarioError(f"{where}: hold_for_comparisons must be true or false")
         drones.append(
-            DroneSpec(ident, items, home3, number(raw, "takeoff_delay_s", 0.0), kind == "ardupilot")
+            DroneSpec(
+                ident,
+                items,
+                home3,
+                number(raw, "takeoff_delay_s", 0.0),
+                kind == "ardupilot",
+                hold_for_comparisons=hold,
+            )
         )
+    failsafe = doc.get("failsafe", "climb")
+    if failsafe not in {a.value for a in Action}:
+        raise ScenarioError(f"{path}: failsafe must be one of climb, hold, off")
     return Scenario(
         name=path.stem,
         time_scale=time_scale,
@@ -167,8 +188,10 @@ def load_scenario(path: str | Path) -> Scenario:
         offset_m=number(doc, "offset_m", 10.0),
         cruise_m_s=number(doc, "cruise_m_s", 10.0),
         beacon_interval_s=number(doc, "beacon_interval_s", 5.0),
-        grid_radius_m=number(doc, "grid_radius_m", 2000.0),
+        grid_radius_m=number(doc, "grid_radius_m", 500.0),
         grid_resolution_mm=int(number(doc, "grid_resolution_mm", 500)) or 500,
+        lookahead_s=number(doc, "lookahead_s", 60.0),
+        failsafe=Action(failsafe),
     )
 
 
@@ -180,23 +203,6 @@ def free_udp_port() -> int:
 
 def _enu(a: tuple[float, float, float], ref: tuple[float, float]) -> tuple[float, float, float]:
     return (*ground_offset(ref[0], ref[1], a[0], a[1]), a[2])
-
-
-def closest_approach(
-    a: list[tuple[float, float, float, float]], b: list[tuple[float, float, float, float]]
-) -> float:
-    """Smallest 3-D distance between two trajectories sampled on (nearly) the same times."""
-    if not a or not b:
-        return math.inf
-    ref = (a[0][1], a[0][2])
-    best, j = math.inf, 0
-    for t, lat, lon, alt in a:
-        while j + 1 < len(b) and abs(b[j + 1][0] - t) <= abs(b[j][0] - t):
-            j += 1
-        pa = _enu((lat, lon, alt), ref)
-        pb = _enu((b[j][1], b[j][2], b[j][3]), ref)
-        best = min(best, math.dist(pa, pb))
-    return best
 
 
 def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float, float]]]:
@@ -267,6 +273,9 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> Replay:
                 beacon_interval_s=scenario.beacon_interval_s,
                 grid_radius_m=scenario.grid_radius_m,
                 grid_resolution_mm=scenario.grid_resolution_mm,
+                lookahead_s=scenario.lookahead_s,
+                cruise_m_s=scenario.cruise_m_s,
+                failsafe=FailsafeSettings(action=scenario.failsafe),
             )
             endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
             companions[d.id] = Companion(settings, endpoint, ap)
@@ -275,6 +284,8 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> Replay:
         origin = time.monotonic()  # simulated time zero: everything is up
         for mock in mocks.values():
             mock.restart_clock(origin)
+        for companion in companions.values():
+            companion.epoch = clock.now()
         started: set[int] = set()
         while True:
             sim = (time.monotonic() - origin) * ts
@@ -284,13 +295,17 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> Replay:
                     await gone.stop()  # the peer vanishes: its radio goes silent
                     vanished[d.id] = companions.pop(d.id)
                     say(f"t={sim:.0f} s: drone {d.id}'s companion vanishes")
-                waiting = d.id in companions and companions[d.id].comparing
+                waiting = (
+                    d.hold_for_comparisons and d.id in companions and companions[d.id].comparing
+                )
                 if d.id not in started and sim >= d.takeoff_delay_s and not waiting:
                     # a drone about to take off waits for its comparison to finish
                     mocks[d.id].take_off()
                     started.add(d.id)
                     say(f"t={sim:.0f} s: drone {d.id} takes off")
-            done = len(started) == len(mocks) and not any(m.mission_running for m in mocks.values())
+            done = len(started) == len(mocks) and not any(
+                m.mission_running or m.holding for m in mocks.values()
+            )
             if done or sim >= scenario.time_limit_s:
                 break
             await asyncio.sleep(0.01)
@@ -313,28 +328,91 @@ async def run_replay(scenario: Scenario, *, progress: bool = False) -> Replay:
     )
 
 
+TIMELINE = (
+    "run_started",
+    "result",
+    "run_failed",
+    "uploaded",
+    "precautionary",
+    "hold",
+    "resumed",
+    "setup_renewed",
+)
+
+
+def _closest(
+    a: Track, b: Track
+) -> tuple[float, float, tuple[float, float, float], tuple[float, float, float]]:
+    """(distance, time, point a, point b) of the closest approach of two trajectories."""
+    best: tuple[float, float, tuple[float, float, float], tuple[float, float, float]] = (
+        math.inf,
+        0.0,
+        (0.0, 0.0, 0.0),
+        (0.0, 0.0, 0.0),
+    )
+    if not a or not b:
+        return best
+    j = 0
+    for t, lat, lon, alt in a:
+        while j + 1 < len(b) and abs(b[j + 1][0] - t) <= abs(b[j][0] - t):
+            j += 1
+        d = math.dist(_enu((lat, lon, alt), (a[0][1], a[0][2])), _enu(b[j][1:], (a[0][1], a[0][2])))
+        if d < best[0]:
+            best = (d, t, (lat, lon, alt), b[j][1:])
+    return best
+
+
+def _acted(c: Companion, peer: int, until: float) -> bool:
+    """Did this companion act on its pair with ``peer`` before ``until``: a precautionary
+    action for it, or a verified edit that flies a segment a result flagged for it higher?"""
+    if any(
+        e.kind == "precautionary" and e.detail.get("peer") == peer and e.t <= until
+        for e in c.events
+    ):
+        return True
+    flagged = {
+        k
+        for e in c.events
+        if e.kind == "result" and e.detail.get("peer") == peer and e.t <= until
+        for k in e.detail.get("flagged", [])
+    }
+    return any(
+        e.kind == "uploaded"
+        and e.t <= until
+        and e.detail.get("verified")
+        and flagged & {int(k) for k in e.detail.get("levels", {})}
+        for e in c.events
+    )
+
+
 def _report(
     scenario: Scenario,
     mocks: dict[int, MockAutopilot],
     companions: dict[int, Companion],
-    baseline: dict[int, list[tuple[float, float, float, float]]],
+    baseline: dict[int, Track],
     finished: bool,
 ) -> dict[str, Any]:
     first = scenario.drones[0]
     grid = GridSpec.geo(
-        round(first.home[0] * 1e7), round(first.home[1] * 1e7), radius_m=scenario.grid_radius_m
+        round(first.home[0] * 1e7), round(first.home[1] * 1e7), radius_m=REPORT_RADIUS_M
     )
     paths = {  # a hover is a point, as Bob sends it
-        d.id: point_as_segment(grid.project_path(path_of(d.mission, ardupilot=d.ardupilot)))
+        d.id: point_as_segment(
+            grid.project_path(path_of(d.mission, ardupilot=d.ardupilot), checked=False)
+        )
         for d in scenario.drones
     }
-    drones, false_alarms = [], 0
+    drones, false_alarms, precautions = [], 0, 0
     for d in scenario.drones:
         c = companions[d.id]
         others = [p for k, p in paths.items() if k != d.id]
         plain = [any(h) for h in zip(*(path_hits(paths[d.id], o) for o in others), strict=True)]
         flagged = sorted(c.flagged)
-        false_alarms += sum(1 for k in flagged if not plain[k])
+        false_alarms += sum(1 for k in flagged if k < len(plain) and not plain[k])
+        precautionary = [
+            {"t": round(e.t, 1), **e.detail} for e in c.events if e.kind == "precautionary"
+        ]
+        precautions += len(precautionary)
         stats = c.endpoint.stats
         drones.append(
             {
@@ -343,14 +421,24 @@ def _report(
                 "segments": len(segments(d.mission, ardupilot=d.ardupilot)),
                 "conflicting_segments": [k for k, h in enumerate(plain) if h],
                 "flagged_segments": flagged,
+                "levels": {str(k): v for k, v in sorted(c.levels.items())},
                 "edits": [e.detail for e in c.events if e.kind == "uploaded"],
-                "verified": any(e.kind == "uploaded" for e in c.events),
-                "runs": [e.detail for e in c.events if e.kind == "result"],
+                "verified": any(e.kind == "uploaded" for e in c.events) or None,
+                "runs": [e.detail | {"t": round(e.t, 1)} for e in c.events if e.kind == "result"],
                 "failures": [e.detail | {"kind": e.kind} for e in c.events if "failed" in e.kind],
+                "precautionary": precautionary,
+                "timeline": [
+                    {"t": round(e.t, 1), "kind": e.kind}
+                    | {k: v for k, v in e.detail.items() if k in ("peer", "phase", "why")}
+                    for e in c.events
+                    if e.kind in TIMELINE
+                ],
                 "bytes_sent": stats.bytes_sent,
                 "frames_sent": stats.frames_sent,
                 "airtime_s": round(stats.airtime_s, 3),
-                "max_altitude_m": max((alt for *_, alt in mocks[d.id].trajectory), default=0.0),
+                "max_altitude_m": round(
+                    max((alt for *_, alt in mocks[d.id].trajectory), default=0.0), 2
+                ),
                 "vehicle_holds": _holds(mocks[d.id].mission, d.mission, c.mission),
             }
         )
@@ -359,16 +447,22 @@ def _report(
     for i, a in enumerate(ids):
         for b in ids[i + 1 :]:
             crossing = any(path_hits(paths[a], paths[b]))
-            with_companion = closest_approach(mocks[a].trajectory, mocks[b].trajectory)
-            without = closest_approach(baseline[a], baseline[b])
-            ok = with_companion >= scenario.offset_m - KINEMATIC_TOLERANCE_M
-            conflicts += crossing
-            resolved += crossing and ok
+            with_companion, when, _, _ = _closest(mocks[a].trajectory, mocks[b].trajectory)
+            without, _, _, _ = _closest(baseline[a], baseline[b])
+            conflict = crossing and without < scenario.offset_m
+            acted = _acted(companions[a], b, when) or _acted(companions[b], a, when)
+            ok = conflict and acted and (with_companion >= scenario.offset_m - RESOLVED_TOLERANCE_M)
+            conflicts += conflict
+            resolved += ok
             pairs.append(
                 {
                     "drones": [a, b],
                     "paths_cross": crossing,
+                    "conflict": conflict,
+                    "acted": acted,
+                    "resolved": ok,
                     "closest_approach_m": round(with_companion, 2),
+                    "closest_approach_t": round(when, 1),
                     "closest_approach_baseline_m": round(without, 2),
                 }
             )
@@ -382,6 +476,7 @@ def _report(
         "pairs": pairs,
         "conflicts": conflicts,
         "conflicts_resolved": resolved,
+        "precautionary_actions": precautions,
         "false_alarms": false_alarms,
     }
 
@@ -403,16 +498,22 @@ def _holds(held: list[MissionItem], original: list[MissionItem], edited: list[Mi
 def format_report(report: dict[str, Any]) -> str:
     lines = [
         f"Replay {report['scenario']} over {report['link']['profile']} "
-        f"(loss {report['link']['loss']:.0%}), time scale {report['time_scale']}x:"
+        f"(loss {report['link']['loss']:.0%}), time scale {report['time_scale']}x"
+        + ("" if report["finished"] else " -- TIME LIMIT REACHED before every mission was flown")
+        + ":"
     ]
     for d in report["drones"]:
         if d["edits"]:
-            what = (
-                f"climbed {report['offset_m']:.0f} m on segments {d['flagged_segments']} "
-                "(upload verified)"
+            levels = ", ".join(
+                f"{k} (+{v * report['offset_m']:.0f} m)" for k, v in d["levels"].items()
             )
+            what = f"flies segments {levels or 'none'} higher (upload verified)"
         else:
             what = "kept its altitude"
+        if d["precautionary"]:
+            what += f"; {len(d['precautionary'])} precautionary action(s)"
+        if d["failures"]:
+            what += f"; {len(d['failures'])} failure(s): {d['failures'][0]['kind']}"
         lines.append(
             f"  drone {d['id']} ({d['autopilot']}): {what}; radio "
             f"{d['bytes_sent']} B in {d['frames_sent']} frames, "
@@ -420,73 +521,153 @@ def format_report(report: dict[str, Any]) -> str:
         )
     for p in report["pairs"]:
         a, b = p["drones"]
+        verdict = (
+            "resolved" if p["resolved"] else "NOT resolved" if p["conflict"] else "no conflict"
+        )
         lines.append(
             f"  drones {a}-{b}: closest approach {p['closest_approach_baseline_m']:.1f} m "
-            f"without the companion, {p['closest_approach_m']:.1f} m with it"
+            f"without the companion, {p['closest_approach_m']:.1f} m with it "
+            f"(t = {p['closest_approach_t']:.0f} s): {verdict}"
         )
     lines.append(
         f"  conflicts resolved {report['conflicts_resolved']}/{report['conflicts']}, "
+        f"precautionary actions {report['precautionary_actions']}, "
         f"false alarms {report['false_alarms']}"
     )
     return "\n".join(lines)
 
 
+MARKERS = {
+    "run_started": ("^", "run started"),
+    "result": ("o", "result"),
+    "uploaded": ("*", "edit verified"),
+    "precautionary": ("X", "precaution"),
+}
+
+
 def plot_report(replay: Replay, out: str | Path) -> None:
-    """PNG: ground tracks with the flagged segments, altitude over time before and after."""
+    """PNG: ground tracks (planned, flown, direction, closest approaches), the distance of
+    every pair over time with the runs' moments marked, and altitudes around the encounters."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    out = Path(out)
+    if out.suffix.lower() != ".png":
+        raise ScenarioError(f"--plot writes a PNG: {out} does not end in .png")
     report, tracks = replay.report, replay.tracks
     ref = next(iter(tracks.paths.values()))[0]
+    ref_deg = (ref[0] / 1e7, ref[1] / 1e7)
 
     def en(lat: float, lon: float) -> tuple[float, float]:
-        north, east, _ = _enu((lat, lon, 0.0), (ref[0] / 1e7, ref[1] / 1e7))
+        north, east, _ = _enu((lat, lon, 0.0), ref_deg)
         return east, north
 
-    fig, (ground, height) = plt.subplots(1, 2, figsize=(13, 5.5))
+    fig, (ground, gap, height) = plt.subplots(1, 3, figsize=(19, 6))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for n, drone in enumerate(report["drones"]):
-        colour = colours[n % len(colours)]
-        path = [en(lat / 1e7, lon / 1e7) for lat, lon in tracks.paths[drone["id"]]]
-        ground.plot(
-            *zip(*path, strict=True), "o-", color=colour, lw=1.2, label=f"drone {drone['id']}"
-        )
+    colour = {d["id"]: colours[n % len(colours)] for n, d in enumerate(report["drones"])}
+    for drone in report["drones"]:
+        ident, c = drone["id"], colour[drone["id"]]
+        path = [en(lat / 1e7, lon / 1e7) for lat, lon in tracks.paths[ident]]
+        ground.plot(*zip(*path, strict=True), "o--", color=c, lw=0.8, ms=3, alpha=0.6)
         for k in drone["flagged_segments"]:
             (x0, y0), (x1, y1) = path[k], path[k + 1]
-            ground.plot([x0, x1], [y0, y1], color="red", lw=5, alpha=0.35)
-        flown = tracks.flown[drone["id"]]
-        base = tracks.baseline[drone["id"]]
-        height.plot(
-            [t for t, *_ in base],
-            [a for *_, a in base],
-            "--",
-            color=colour,
-            lw=1,
-            label=f"drone {drone['id']} planned",
-        )
-        height.plot(
-            [t for t, *_ in flown],
-            [a for *_, a in flown],
-            color=colour,
-            lw=1.5,
-            label=f"drone {drone['id']} flown",
-        )
-    ground.plot([], [], color="red", lw=5, alpha=0.35, label="flagged segments")
+            ground.plot([x0, x1], [y0, y1], color="red", lw=6, alpha=0.25)
+        flown = [en(lat, lon) for _, lat, lon, _ in tracks.flown[ident]]
+        if len(flown) > 1:
+            ground.plot(*zip(*flown, strict=True), color=c, lw=1.6, label=f"drone {ident} flown")
+            step = max(1, len(flown) // 6)
+            for (x0, y0), (x1, y1) in zip(flown[::step], flown[1::step], strict=False):
+                if (x0, y0) != (x1, y1):
+                    ground.annotate(
+                        "", (x1, y1), (x0, y0), arrowprops={"arrowstyle": "->", "color": c}
+                    )
+    for pair in report["pairs"]:
+        a, b = pair["drones"]
+        _, t, pa, pb = _closest(tracks.flown[a], tracks.flown[b])
+        if math.isfinite(pair["closest_approach_m"]):
+            (xa, ya), (xb, yb) = en(pa[0], pa[1]), en(pb[0], pb[1])
+            ground.plot([xa, xb], [ya, yb], "k:", lw=1)
+            ground.plot([xa, xb], [ya, yb], "kx", ms=8)
+            ground.annotate(
+                f"{a}-{b}: {pair['closest_approach_m']:.1f} m at {t:.0f} s", (xa, ya), fontsize=7
+            )
+    ground.plot([], [], color="red", lw=6, alpha=0.25, label="flagged segments")
+    ground.plot([], [], "kx", label="closest approach")
     ground.set(xlabel="east (m)", ylabel="north (m)", title=f"{report['scenario']}: ground tracks")
     ground.set_aspect("equal", adjustable="datalim")
-    ground.legend(loc="best", fontsize=8)
+    ground.legend(loc="best", fontsize=7)
+
+    moments: list[float] = []
+    for pair in report["pairs"]:
+        a, b = pair["drones"]
+        for which, style in ((tracks.flown, "-"), (tracks.baseline, ":")):
+            series = _separation(which[a], which[b])
+            if series:
+                gap.plot(
+                    *zip(*series, strict=True),
+                    style,
+                    lw=1.4 if style == "-" else 1,
+                    label=f"{a}-{b} {'with' if style == '-' else 'without'} companion",
+                )
+        for drone in report["drones"]:
+            if drone["id"] not in (a, b):
+                continue
+            other = b if drone["id"] == a else a
+            for event in drone["timeline"]:
+                if event["kind"] in MARKERS and event.get("peer", other) == other:
+                    marker, _ = MARKERS[event["kind"]]
+                    gap.axvline(event["t"], color=colour[drone["id"]], lw=0.4, alpha=0.5)
+                    gap.plot(event["t"], 0, marker, color=colour[drone["id"]], ms=8, clip_on=False)
+                    moments.append(event["t"])
+        moments.append(pair["closest_approach_t"])
+    for marker, label in MARKERS.values():
+        gap.plot([], [], marker, color="grey", label=label)
+    gap.axhline(report["offset_m"], color="red", lw=0.8, ls="--", label="offset")
+    gap.set(xlabel="simulated time (s)", ylabel="3-D distance (m)", title="distance of each pair")
+    gap.set_yscale("symlog", linthresh=20)
+    gap.legend(loc="best", fontsize=7)
+
+    for drone in report["drones"]:
+        ident, c = drone["id"], colour[drone["id"]]
+        for which, style, label in (
+            (tracks.baseline, "--", "planned"),
+            (tracks.flown, "-", "flown"),
+        ):
+            track = which[ident]
+            height.plot(
+                [p[0] for p in track],
+                [p[3] for p in track],
+                style,
+                color=c,
+                lw=1 if style == "--" else 1.5,
+                label=f"drone {ident} {label}",
+            )
+    if moments:
+        height.set_xlim(max(min(moments) - 60, 0), max(moments) + 60)
     height.set(
         xlabel="simulated time (s)",
         ylabel="altitude AMSL (m)",
-        title="altitude before (dashed) and after (solid)",
+        title="altitude around the encounters",
     )
-    height.legend(loc="best", fontsize=8)
+    height.legend(loc="best", fontsize=7)
     fig.tight_layout()
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
+    fig.savefig(tmp, dpi=100)
     plt.close(fig)
     tmp.replace(out)
+
+
+def _separation(a: Track, b: Track) -> list[tuple[float, float]]:
+    """3-D distance of two trajectories over time (b sampled at a's times)."""
+    if not a or not b:
+        return []
+    out = []
+    j = 0
+    ref = (a[0][1], a[0][2])
+    for t, lat, lon, alt in a[:: max(1, len(a) // 2000)]:
+        while j + 1 < len(b) and abs(b[j + 1][0] - t) <= abs(b[j][0] - t):
+            j += 1
+        out.append((t, math.dist(_enu((lat, lon, alt), ref), _enu(b[j][1:], ref))))
+    return out

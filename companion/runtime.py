@@ -1,51 +1,63 @@
 """The companion process: beacons, peers, private comparisons and altitude edits.
 
-One :class:`Companion` per drone, beside its autopilot.  It beacons its coarse position and
-key fingerprint; when it hears a peer within the initiation range, the role rule
-(:func:`companion.beacon.alice_of`) picks exactly one of the two as Alice.  Alice compares the
-part of her mission still to fly with the peer's, through the private protocol over the radio;
-the peer (Bob) answers with the part of *his* mission still to fly and learns nothing.  Alice
-plans the altitude edits for her flagged segments, uploads them and reads them back.  Runs per
-peer are limited (probing mitigation); failures are logged, leave the mission as it was, and
-never stop the process from serving other peers.
+One :class:`Companion` per drone, beside its autopilot.  It beacons its coarse position; when
+it hears a peer within the initiation range, the role rule (:func:`companion.beacon.alice_of`)
+picks exactly one of the two as Alice.  Alice compares the part of her mission still to fly
+with the peer's through the private protocol over the radio; the peer (Bob) answers with the
+part of *his* mission still to fly and learns nothing.  Alice flies her conflicting segments
+at an altitude level (:mod:`companion.levels`), uploads the edit and reads it back.
+
+In flight, what can be reached soon is compared first: a *near* run on the next
+``lookahead_s`` seconds of both paths, then the *full* run on the rest.  The most urgent peer
+(the one that could be here first) is served first.  Before and during every run Alice checks
+that the result can arrive in time (:mod:`companion.failsafe`); if not, she takes the
+precautionary action (climb over, or hold before, the segments within the peer's reach) until
+the result is in.  The OT setup with each peer is made once and cached.  Runs per peer are
+limited (probing mitigation); failures are recorded, leave the mission as it was, and never
+stop the process from serving other peers: nothing raises out of a run.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import hashlib
+import itertools
 import logging
 import math
 import random
+import secrets
 from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.budget import BudgetExceededError, RunBudget
 from protocol.errors import ProtocolError
 from protocol.grid import GridSpec
-from protocol.intersection import Alice, Bob, BobKeys, generate_bits_key
-from protocol.wire import Suite
+from protocol.intersection import MAX_SEGMENTS, Alice, Bob, BobKeys, Limits
+from protocol.ot.setup import ChooserSetup, HolderSetup
+from protocol.suite_compact import message_sizes
+from protocol.wire import Hello, Suite
 
 from .autopilot import Autopilot, AutopilotError
 from .beacon import SIZE as BEACON_SIZE
-from .beacon import Beacon, BeaconError, alice_of, fingerprint
+from .beacon import Beacon, BeaconError, alice_of
 from .exchange import run_alice, serve_bob
+from .failsafe import Action, FailsafeSettings, run_seconds, too_late
+from .levels import assign, levels_mask
 from .link.arq import LinkError, PeerAborted
-from .link.endpoint import ABORT_REFUSED, LinkEndpoint
+from .link.endpoint import ABORT_PROTOCOL, ABORT_REFUSED, LinkEndpoint
 from .link.frames import OVERHEAD
-from .mission import (
-    MissionItem,
-    ground_offset,
-    path_of,
-    point_as_segment,
-    remaining,
-    vertices,
-)
+from .mission import MissionItem, path_of, point_as_segment, remaining, vertices
+from .peers import Peer, cut_at, distance_m, segments_within, time_to_meet
 from .planner import OffsetSettings, PlannerError, plan_offsets
+from .radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
 
 log = logging.getLogger("companion")
 _JITTER = random.SystemRandom()
+UNKNOWN_SETUP = "unknown OT setup"
+SETUPS_PER_PEER = 2
+NEAR_SLACK_S = 30.0  # the near run reaches this far past the earliest possible meeting
+NEAR_SEGMENTS = 2  # and each side compares at least its next two segments
+QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a full run
 
 
 @dataclass(frozen=True)
@@ -58,22 +70,14 @@ class CompanionSettings:
     beacon_interval_s: float = 10.0
     initiation_range_m: float = 5000.0
     grid_resolution_mm: int = 500
-    grid_radius_m: float = 2000.0
-    max_runs_per_peer: int = 6
+    grid_radius_m: float = 500.0  # smallest comparison box; doubled until it holds Alice's path
+    max_runs_per_peer: int = 8
     run_window_s: float = 3600.0
     run_timeout_s: float | None = None
-    retry_after_s: float = 60.0
-
-
-@dataclass
-class Peer:
-    node: int
-    beacon: Beacon
-    heard_at: float
-    compared_version: int | None = None  # the peer's mission version we compared against
-    compared_own: int | None = None  # our mission version at that run
-    next_try: float = 0.0
-    role: str | None = None  # "alice" or "bob" once this pair has met: roles then stay
+    retry_after_s: float = 30.0
+    lookahead_s: float = 60.0  # the near run covers at least this much flight (0: no near run)
+    cruise_m_s: float = 10.0  # speed assumed for the look-ahead when nothing better is known
+    failsafe: FailsafeSettings = field(default_factory=FailsafeSettings)
 
 
 @dataclass
@@ -85,14 +89,22 @@ class Event:
     detail: dict[str, Any]
 
 
-def _distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
-    return math.hypot(*ground_offset(a[0] / 1e7, a[1] / 1e7, b[0] / 1e7, b[1] / 1e7))
-
-
 def mission_version(items: list[MissionItem], ardupilot: bool) -> int:
     """16-bit digest of the ground track: altitude edits do not change it."""
+    import hashlib
+
     digest = hashlib.sha256(repr(path_of(items, ardupilot=ardupilot)).encode()).digest()
     return int.from_bytes(digest[:2], "big")
+
+
+def box_radius_m(path: list[tuple[int, int]], centre: tuple[int, int], minimum: float) -> float:
+    """The comparison box's radius: ``minimum``, doubled until it holds the path with room
+    to spare (so Bob's walk along its edge stays clear of Alice's path)."""
+    extent = max((distance_m(centre, p) for p in path), default=0.0) * 1.1 + 50.0
+    radius = minimum
+    while radius < extent:
+        radius *= 2
+    return radius
 
 
 class Companion:
@@ -103,30 +115,43 @@ class Companion:
         self.endpoint = endpoint
         self.autopilot = autopilot
         self.clock = endpoint.clock
-        self.bob_keys = BobKeys.generate((settings.suite,))
-        self.alice_keys = {settings.suite: generate_bits_key(settings.suite)}
-        n = self.bob_keys.paillier.public_key.n
-        self.fingerprint = fingerprint(int(n).to_bytes((int(n).bit_length() + 7) // 8, "big"))
+        self.bob_keys = BobKeys.generate() if settings.suite is Suite.PAPER else None
+        self.instance = secrets.token_bytes(8)
+        self.holder_setups: dict[int, HolderSetup] = {}  # peer -> ours as Alice
+        self.chooser_setups: dict[int, dict[bytes, ChooserSetup]] = {}  # peer -> ours as Bob
         self.budget = RunBudget(settings.max_runs_per_peer, settings.run_window_s)
         self.peers: dict[int, Peer] = {}
         self.events: list[Event] = []
         self.original: list[MissionItem] = []
         self.mission: list[MissionItem] = []
-        self.flagged: set[int] = set()
+        self.levels: dict[int, int] = {}  # segment -> altitude level, as uploaded
+        self.flagged: set[int] = set()  # segments the comparisons found in conflict
+        self.precaution: dict[int, dict[int, int]] = {}  # peer -> segment -> level
         self.position: tuple[int, int, float] = (0, 0, 0.0)  # lat, lon degE7, alt AMSL
         self.relative_alt = 0.0
+        self.speed_m_s = 0.0
         self.current_item = 0
         self._tasks: list[asyncio.Task[None]] = []
         self._children: set[asyncio.Task[None]] = set()
         self._busy = asyncio.Lock()
+        self._radio = RadioTurns()  # one run on the air at a time, as Alice or Bob
+        self._edit_lock = asyncio.Lock()
+        self._wake = asyncio.Event()
+        self._beacon_now = asyncio.Event()
+        self._sessions = 0  # runs on the air (as Alice or Bob)
+        self._answering = 0  # runs we answer as Bob
+        self._holding: set[int] = set()  # peers we hold for
+        self.epoch = 0.0
 
     # ------------------------------------------------------------------ lifecycle
 
     def record(self, kind: str, **detail: Any) -> None:
-        self.events.append(Event(self.clock.now(), kind, detail))
+        """An event at link seconds since :attr:`epoch` (the start, or the replay's zero)."""
+        self.events.append(Event(self.clock.now() - self.epoch, kind, detail))
         log.info("node %d %s %s", self.settings.node, kind, detail)
 
     async def start(self) -> None:
+        self.epoch = self.clock.now()
         self.original = await self.autopilot.download()
         self.mission = list(self.original)
         self.record(
@@ -141,6 +166,7 @@ class Companion:
             asyncio.create_task(self._beacons(), name="beacons"),
             asyncio.create_task(self._listen(), name="listen"),
             asyncio.create_task(self._serve(), name="serve"),
+            asyncio.create_task(self._alice_loop(), name="alice"),
         ]
 
     def _spawn(self, work: Any) -> None:
@@ -149,9 +175,9 @@ class Companion:
         task.add_done_callback(self._children.discard)
 
     def _budget_key(self, node: int) -> bytes:
-        """Runs are counted per peer identity: node id and the key fingerprint it beacons."""
+        """Runs are counted per peer: its node id and the instance it beacons."""
         peer = self.peers.get(node)
-        return node.to_bytes(2, "big") + (peer.beacon.fingerprint if peer else b"")
+        return node.to_bytes(2, "big") + (peer.beacon.instance if peer else b"")
 
     async def stop(self) -> None:
         for task in [*self._tasks, *self._children]:
@@ -162,12 +188,15 @@ class Companion:
                     await asyncio.wait_for(asyncio.shield(task), 5.0)
                 except TimeoutError:
                     log.warning("node %d: task %s did not stop", self.settings.node, task)
+                except Exception as exc:  # a task that failed has nothing left to stop
+                    log.warning("node %d: task %s ended with %r", self.settings.node, task, exc)
         await self.endpoint.close()
 
     @property
     def comparing(self) -> bool:
-        """A comparison as Alice is under way (a drone about to take off waits for it)."""
-        return self._busy.locked()
+        """A comparison as Alice is under way or half done (a drone about to take off waits
+        for it)."""
+        return self._busy.locked() or any(p.plan for p in self.peers.values())
 
     @property
     def on_ground(self) -> bool:
@@ -183,6 +212,7 @@ class Companion:
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
         telemetry = TelemetryAsync(self.autopilot.system)
+        last: tuple[float, tuple[int, int]] | None = None
         try:
             async for p in telemetry.subscribe_position():
                 self.position = (
@@ -190,7 +220,16 @@ class Companion:
                     round(p.longitude_deg * 1e7),
                     float(p.absolute_altitude_m),
                 )
+                was_on_ground = self.on_ground
                 self.relative_alt = float(p.relative_altitude_m)
+                if was_on_ground and not self.on_ground:
+                    self._beacon_now.set()  # taking off: announce it
+                now = self.clock.now()
+                if last is None or now - last[0] >= 1.0:
+                    if last is not None:
+                        moved = distance_m(last[1], self.position[:2]) / (now - last[0])
+                        self.speed_m_s = 0.5 * (self.speed_m_s + moved)
+                    last = (now, self.position[:2])
         finally:
             telemetry.destroy()
 
@@ -209,7 +248,8 @@ class Companion:
             self.on_ground,
             frozenset({self.settings.suite}),
             self.version,
-            self.fingerprint,
+            self.instance,
+            levels_mask(self.levels),
         )
 
     @property
@@ -223,13 +263,26 @@ class Companion:
         return max(self.settings.beacon_interval_s, airtime / (0.05 * profile.duty_cycle))
 
     async def _beacons(self) -> None:
-        # Random phase and jitter: drones that beacon in lockstep collide on every beacon.
-        await self.clock.sleep(_JITTER.uniform(0, self.beacon_interval))
+        """Beacon every interval (random phase and jitter: drones that beacon in lockstep
+        collide on every beacon), and at once when the drone takes off or hears a new peer
+        -- on a duty-cycled link the interval is minutes, discovery must not wait for it."""
+        wait = _JITTER.uniform(0, self.beacon_interval)
+        deferred = 0
         while True:
-            if self.position[:2] != (0, 0):
+            with contextlib.suppress(TimeoutError):
+                await self.clock.wait_for(self._beacon_now.wait(), wait)
+            urgent = self._beacon_now.is_set()
+            if urgent:
+                self._beacon_now.clear()
+                await self.clock.sleep(_JITTER.uniform(0.0, 1.0))  # do not answer in chorus
+            if (self._sessions or self.endpoint.busy()) and not urgent and deferred < 3:
+                # A run is on the air: a beacon would only collide with its frames.
+                deferred += 1
+            elif self.position[:2] != (0, 0):
+                deferred = 0
                 with contextlib.suppress(LinkError):
                     await self.endpoint.beacon(self._beacon().encode())
-            await self.clock.sleep(self.beacon_interval * _JITTER.uniform(0.7, 1.3))
+            wait = self.beacon_interval * _JITTER.uniform(0.7, 1.3)
 
     async def _listen(self) -> None:
         while True:
@@ -244,27 +297,118 @@ class Companion:
             if peer is None:
                 peer = self.peers[src] = Peer(src, beacon, now)
                 self.record("peer", peer=src, on_ground=beacon.on_ground)
-            peer.beacon, peer.heard_at = beacon, now
-            if self._should_compare(peer, now):
-                self._spawn(self._compare(peer))
+                self._beacon_now.set()  # let it hear us without waiting an interval
+            elif peer.beacon.instance != beacon.instance:
+                # The peer restarted: the setups we shared are gone on its side.
+                self.holder_setups.pop(src, None)
+                self.chooser_setups.pop(src, None)
+            levels_changed = peer.beacon.levels != beacon.levels
+            peer.heard(beacon, now, self.position[:2])
+            if levels_changed and peer.conflicts:
+                self._spawn(self._replan(f"peer {src} announced levels {beacon.levels:#04x}"))
+            self._wake.set()
 
     def _should_compare(self, peer: Peer, now: float) -> bool:
         me = (self.on_ground, self.settings.node)
         them = (peer.beacon.on_ground, peer.node)
-        if peer.role == "bob" or self._busy.locked():
+        if peer.role == "bob":
             return False
         if peer.role is None and alice_of(me, them) != self.settings.node:
             return False
         if self.settings.suite not in peer.beacon.suites or now < peer.next_try:
             return False
-        if _distance_m(self.position[:2], (peer.beacon.lat, peer.beacon.lon)) > (
-            self.settings.initiation_range_m
-        ):
+        if self.position[:2] == (0, 0):
             return False
-        return (peer.compared_version, peer.compared_own) != (
-            peer.beacon.mission_version,
-            self.version,
+        if distance_m(self.position[:2], peer.position) > self.settings.initiation_range_m:
+            return False
+        return peer.compared != (peer.beacon.mission_version, self.version)
+
+    def _urgency(self, peer: Peer) -> float:
+        return time_to_meet(
+            self.position[:2],
+            self.speed_m_s,
+            peer,
+            floor_m_s=self.settings.failsafe.floor_m_s,
+            now=self.clock.now(),
         )
+
+    async def _alice_loop(self) -> None:
+        """One run at a time: every pending near run before any full run, the most urgent
+        peer first; no new run while we answer a peer (one radio, half duplex)."""
+        while True:
+            with contextlib.suppress(TimeoutError):
+                await self.clock.wait_for(self._wake.wait(), 1.0)
+            self._wake.clear()
+            now = self.clock.now()
+            due = [p for p in self.peers.values() if self._should_compare(p, now)]
+            if not due:
+                continue
+            for peer in due:
+                version = (peer.beacon.mission_version, self.version)
+                if peer.plan_version != version or not peer.plan:
+                    if peer.plan_version != version:
+                        peer.covered = set()
+                    peer.plan, peer.plan_version = self._phases(peer), version
+            # A full run after a near run waits until it is needed (or the channel is quiet):
+            # meanwhile the radio serves every drone's near runs.
+            quiet = not self.endpoint.busy(QUIET_S) and not self._radio.waiting()
+            ready = [p for p in due if p.plan[0][0] == "near" or p.full_after <= now or quiet]
+            if not ready:
+                continue
+            peer = min(ready, key=lambda p: (p.plan[0][0] != "near", self._urgency(p)))
+            phase, horizon = peer.plan[0]
+            try:
+                priority = OWN_NEAR if phase == "near" else OWN_FULL
+                async with self._busy, self._radio.turn(priority):
+                    done = await self._run(peer, phase, horizon)
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:  # nothing may stop the companion
+                log.exception("node %d: comparison failed", self.settings.node)
+                self.record("run_failed", peer=peer.node, error=f"internal: {exc!r}")
+                done = False
+            if done:
+                peer.plan.pop(0)
+                if not peer.plan:
+                    peer.compared = peer.plan_version
+                elif phase == "near":
+                    peer.full_after = self._full_deadline(peer, horizon)
+            else:
+                peer.plan = []
+                peer.next_try = self.clock.now() + self.settings.retry_after_s
+            self._wake.set()  # look again at once
+
+    def _full_deadline(self, peer: Peer, horizon: int) -> float:
+        """When the full run must start at the latest: before we leave what the near run
+        compared, and before the peer can be beyond what it showed (its horizon), less the
+        run's estimated time and the margin.  On the ground: at once."""
+        now = self.clock.now()
+        if self.on_ground:
+            return now
+        speed = max(self.speed_m_s, self.settings.cruise_m_s)
+        start, path = self._remaining_path()
+        covered = [k - start for k in sorted(peer.covered) if k >= start]
+        here = self._here()
+        left = sum(
+            distance_m(here if here is not None and k == 0 else a, b)
+            for k, (a, b) in enumerate(itertools.pairwise(path))
+            if k <= (covered[-1] if covered else -1)
+        )
+        grid = self._grid(path)
+        m = Limits().padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
+        slack = min(left, horizon) / speed - self._seconds(m, grid, fresh=False)
+        return now + max(slack - self.settings.failsafe.margin_s, 0.0)
+
+    def _phases(self, peer: Peer) -> list[tuple[str, int]]:
+        """The runs a comparison with ``peer`` takes: near (what can be reached soon) when the
+        remaining path reaches beyond its horizon, then full (horizon 0: everything)."""
+        _, path = self._remaining_path()
+        phases = [("full", 0)]
+        if self.settings.lookahead_s > 0 and len(path) >= 2:
+            horizon = self._horizon_m(peer, path)
+            if len(self._near(path, horizon)) < len(path):
+                phases.insert(0, ("near", horizon))
+        return phases
 
     # ------------------------------------------------------------------ Alice
 
@@ -275,72 +419,259 @@ class Companion:
         )
         return start, path_of(self.mission, ardupilot=ap)[start:]
 
-    async def _compare(self, peer: Peer) -> None:
-        async with self._busy:
-            now = self.clock.now()
-            peer.next_try = now + self.settings.retry_after_s
-            start, path = self._remaining_path()
-            if len(path) < 2:
-                return
+    def _horizon_m(self, peer: Peer, path: list[tuple[int, int]]) -> int:
+        """How far ahead the near run looks: long enough that what lies beyond can wait for
+        the full run -- every peer now due gets its near and its full run, one at a time, so
+        the estimate counts them all --, past the worst-case time until the peer could be
+        here (a near run that ends before that moment would find nothing), and at least
+        lookahead_s of flight.  Every term comes from what the beacons and the run sizes
+        already tell: the horizon shows Bob nothing about Alice's path."""
+        speed = max(self.speed_m_s, self.settings.cruise_m_s)  # Bob cuts his path alike
+        grid = self._grid(path)
+        m = Limits().padded(min(len(path) - 1, MAX_SEGMENTS))
+        now = self.clock.now()
+        due = [p for p in self.peers.values() if self._should_compare(p, now)] or [peer]
+        runs = sum(
+            self._seconds(2, grid, fresh=p.node not in self.holder_setups)
+            + self._seconds(m, grid, fresh=False)
+            for p in due
+        )
+        # Nothing can happen before the peer could be here (both at cruise speed at least);
+        # reach well past that moment.
+        cruise = self.settings.cruise_m_s
+        meet = time_to_meet(self.position[:2], speed, peer, floor_m_s=cruise) + NEAR_SLACK_S
+        meet = meet if math.isfinite(meet) else 0.0
+        seconds = max(self.settings.lookahead_s, runs + self.settings.failsafe.margin_s, meet)
+        return round(seconds * speed)
+
+    def _grid(self, path: list[tuple[int, int]]) -> GridSpec:
+        lat, lon = self.position[:2]
+        radius = box_radius_m(path, (lat, lon), self.settings.grid_radius_m)
+        return GridSpec.geo(
+            lat, lon, resolution_mm=self.settings.grid_resolution_mm, radius_m=radius
+        )
+
+    def _here(self) -> tuple[int, int] | None:
+        """Where the drone is, for distances along its path (None on the ground)."""
+        return None if self.on_ground or self.position[:2] == (0, 0) else self.position[:2]
+
+    async def _run(self, peer: Peer, phase: str, horizon: int) -> bool:
+        """One run; True when it ended with a result (or had nothing to compare)."""
+        start, path = self._remaining_path()
+        path = self._near(path, horizon)
+        if len(path) < 2:
+            return True
+        now = self.clock.now()
+        try:
+            self.budget.admit(self._budget_key(peer.node), now)
+        except BudgetExceededError as exc:
+            self.record("budget", peer=peer.node, error=str(exc))
+            return False
+        peer.role = "alice"
+        for attempt in range(2):
+            grid = self._grid(path)
+            setup = self.holder_setups.get(peer.node)
             try:
-                self.budget.admit(self._budget_key(peer.node), now)
-            except BudgetExceededError as exc:
-                self.record("budget", peer=peer.node, error=str(exc))
-                return
-            lat, lon = self.position[:2]
-            grid = GridSpec.geo(
-                lat,
-                lon,
-                resolution_mm=self.settings.grid_resolution_mm,
-                radius_m=self.settings.grid_radius_m,
+                alice = Alice(
+                    grid.project_path(path),
+                    grid,
+                    suite=self.settings.suite,
+                    setup=setup,
+                    horizon_m=horizon,
+                )
+            except ProtocolError as exc:
+                self.record("run_failed", peer=peer.node, phase=phase, error=str(exc))
+                return False
+            needed = self._estimate(alice, grid, fresh=setup is None)
+            meet = self._urgency(peer)
+            self.record(
+                "run_started",
+                peer=peer.node,
+                phase=phase,
+                segments=alice.m,
+                first_segment=start,
+                estimate_s=round(needed, 1),
+                time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
             )
-            version = peer.beacon.mission_version
-            peer.role = "alice"
+            if too_late(needed, meet, self.settings.failsafe):
+                await self._precaution(peer, start, path, needed, meet)
+            watchdog = asyncio.create_task(self._watch(peer, start, path, needed))
+            self._sessions += 1
             try:
-                alice = Alice(grid.project_path(path), grid, self.alice_keys)
                 report = await run_alice(
                     self.endpoint, peer.node, alice, timeout=self.settings.run_timeout_s
                 )
             except PeerAborted as exc:
+                if exc.code == ABORT_PROTOCOL and UNKNOWN_SETUP in exc.text and attempt == 0:
+                    self.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
+                    self.record("setup_renewed", peer=peer.node)
+                    continue
                 if exc.code == ABORT_REFUSED and "role" in exc.text:
                     peer.role = "bob"  # the peer already resolved this pair as Alice
-                self.record("run_failed", peer=peer.node, error=str(exc))
-                return
+                    self.record("yielded", peer=peer.node, reason="the peer is Alice")
+                    return False
+                self.record("run_failed", peer=peer.node, phase=phase, error=str(exc))
+                return False
             except (ProtocolError, LinkError, ValueError) as exc:
-                self.record("run_failed", peer=peer.node, error=str(exc))
-                return
-            flagged = {start + j for j, hit in enumerate(report.hits) if hit}
-            peer.compared_version, peer.compared_own = version, self.version
-            self.record(
-                "result",
-                peer=peer.node,
-                hits=report.hits,
-                first_segment=start,
-                flagged=sorted(flagged),
-                bytes=report.bytes_sent,
-                cpu_s=report.cpu_s,
-            )
-            if flagged - self.flagged:
-                await self._edit(self.flagged | flagged)
-
-    async def _edit(self, flagged: set[int]) -> None:
-        try:
-            new = plan_offsets(
-                self.original, flagged, self.settings.offset, ardupilot=self.settings.ardupilot
-            )
-        except PlannerError as exc:
-            self.record("plan_failed", error=str(exc))
-            return
-        try:
-            held = await self.autopilot.download()
-            await self.autopilot.replace_mission(new, held)
-        except AutopilotError as exc:
-            self.record("upload_failed", error=str(exc))
-            return
-        self.mission, self.flagged = new, flagged
+                self.record("run_failed", peer=peer.node, phase=phase, error=str(exc))
+                return False
+            finally:
+                self._sessions -= 1
+                watchdog.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await watchdog
+            break
+        else:
+            return False
+        if alice.setup is not None:
+            self.holder_setups[peer.node] = alice.setup
+        flagged = {start + j for j, hit in enumerate(report.hits) if hit}
+        covered = set(range(start, start + len(path) - 1))
+        peer.conflicts = (peer.conflicts - covered) | flagged
+        peer.covered |= covered
         self.record(
-            "uploaded", flagged=sorted(flagged), verified=True, offset_m=self.settings.offset.delta
+            "result",
+            peer=peer.node,
+            phase=phase,
+            hits=report.hits,
+            first_segment=start,
+            flagged=sorted(flagged),
+            bytes=report.bytes_sent,
+            cpu_s=round(report.cpu_s, 3),
+            run_s=round(report.wall_s, 1),
         )
+        if phase == "full" or covered >= set(self.precaution.get(peer.node, {})):
+            await self._release(peer)
+        await self._replan(f"result of the {phase} run with {peer.node}")
+        return True
+
+    def _estimate(self, alice: Alice, grid: GridSpec, *, fresh: bool) -> float:
+        return self._seconds(alice.m, grid, fresh=fresh)
+
+    def _seconds(self, m: int, grid: GridSpec, *, fresh: bool) -> float:
+        """Link seconds an m x m run will need (Bob's size taken as Alice's: it is unknown)."""
+        if self.settings.suite is not Suite.COMPACT:
+            return 0.0
+        sizes = message_sizes(m, m, grid, fresh_setup=fresh)
+        return run_seconds(
+            sizes,
+            self.endpoint.profile,
+            loss=self.settings.failsafe.loss,
+            duty=self.endpoint.duty,
+            now=self.clock.now(),
+        )
+
+    async def _watch(
+        self, peer: Peer, start: int, path: list[tuple[int, int]], needed: float
+    ) -> None:
+        """While a run is under way: act as soon as its result could come too late."""
+        began = self.clock.now()
+        while True:
+            await self.clock.sleep(2.0)
+            left = max(needed - (self.clock.now() - began), 2.0)
+            if too_late(left, self._urgency(peer), self.settings.failsafe):
+                await self._precaution(peer, start, path, left, self._urgency(peer))
+                return
+
+    async def _precaution(
+        self,
+        peer: Peer,
+        start: int,
+        path: list[tuple[int, int]],
+        needed: float,
+        meet: float,
+    ) -> None:
+        settings = self.settings.failsafe
+        if peer.node in self.precaution or peer.node in self._holding or self.on_ground:
+            return  # (on the ground the drone waits for its comparisons anyway)
+        reach = max(peer.speed_m_s, settings.floor_m_s) * (needed + settings.margin_s)
+        reach += settings.reach_margin_m
+        # Segments a finished run already compared with this peer are decided: no precaution.
+        risky = [
+            k for k in segments_within(path, start, peer.position, reach) if k not in peer.covered
+        ]
+        if not risky:
+            return
+        self.record(
+            "precautionary",
+            peer=peer.node,
+            action=settings.action.value,
+            segments=risky,
+            needed_s=round(needed, 1),
+            time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
+        )
+        if settings.action is Action.OFF:
+            return
+        if settings.action is Action.CLIMB:
+            level = assign({peer.node: set(risky)}, {peer.node: peer.beacon.levels})
+            self.precaution[peer.node] = level
+            await self._replan(f"precaution for {peer.node}")
+        else:
+            self._holding.add(peer.node)
+            self._spawn(self._hold_before(peer.node, risky[0]))
+
+    async def _hold_before(self, peer: int, segment: int) -> None:
+        """Pause the mission once the vehicle reaches the start of ``segment``."""
+        items = vertices(self.mission, ardupilot=self.settings.ardupilot)
+        gate = items[segment + 1] if segment + 1 < len(items) else items[-1]
+        while peer in self._holding and self.current_item < gate:
+            await self.clock.sleep(0.5)
+        if peer not in self._holding:
+            return
+        try:
+            await self.autopilot.pause()
+            self.record("hold", peer=peer, before_segment=segment)
+        except AutopilotError as exc:
+            self.record("hold_failed", peer=peer, error=str(exc))
+
+    async def _release(self, peer: Peer) -> None:
+        """The result is in: precautions for this peer end."""
+        self.precaution.pop(peer.node, None)
+        if peer.node in self._holding:
+            self._holding.discard(peer.node)
+            if not self._holding:
+                try:
+                    await self.autopilot.resume()
+                    self.record("resumed", peer=peer.node)
+                except AutopilotError as exc:
+                    self.record("resume_failed", peer=peer.node, error=str(exc))
+
+    async def _replan(self, why: str) -> None:
+        """Upload the altitude levels the conflicts and precautions call for, if they changed."""
+        async with self._edit_lock:
+            masks = {node: p.beacon.levels for node, p in self.peers.items()}
+            levels = assign({n: p.conflicts for n, p in self.peers.items() if p.conflicts}, masks)
+            for extra in self.precaution.values():
+                for segment, level in extra.items():
+                    levels[segment] = max(levels.get(segment, 0), level)
+            if levels == self.levels:
+                return
+            try:
+                new = plan_offsets(
+                    self.original, levels, self.settings.offset, ardupilot=self.settings.ardupilot
+                )
+            except PlannerError as exc:
+                self.record("plan_failed", error=str(exc))
+                return
+            # Keep the item the vehicle is flying: an upload must not restart the mission.
+            current = min(self.current_item, len(new) - 1)
+            new = [it.replace(current=int(i == current)) for i, it in enumerate(new)]
+            try:
+                held = await self.autopilot.download()
+                await self.autopilot.replace_mission(new, held)
+            except AutopilotError as exc:
+                self.record("upload_failed", error=str(exc))
+                return
+            self.mission, self.levels = new, levels
+            self.flagged = {k for p in self.peers.values() for k in p.conflicts}
+            self.record(
+                "uploaded",
+                flagged=sorted(levels),
+                levels={str(k): v for k, v in sorted(levels.items())},
+                verified=True,
+                offset_m=self.settings.offset.delta,
+                why=why,
+            )
 
     # ------------------------------------------------------------------ Bob
 
@@ -349,27 +680,70 @@ class Companion:
             peer, session = await self.endpoint.accept()
             self._spawn(self._answer(peer, session))
 
+    def _near(self, path: list[tuple[int, int]], horizon: int) -> list[tuple[int, int]]:
+        """The part of the remaining path a run with this horizon compares: up to the first
+        vertex ``horizon`` metres ahead, and at least our next NEAR_SEGMENTS segments (a
+        near run of fewer costs about the same: sizes are padded to powers of two)."""
+        if horizon <= 0:
+            return path
+        cut = cut_at(path, horizon, self._here())
+        return cut if len(cut) > NEAR_SEGMENTS else path[: NEAR_SEGMENTS + 1]
+
+    def _bob_path(self, hello: Hello) -> list[tuple[int, int]]:
+        _, path = self._remaining_path()
+        return point_as_segment(self._near(path, hello.horizon_m))  # hovering: a point
+
     async def _answer(self, peer: int, session: int) -> None:
         known = self.peers.get(peer)
         if known is not None and known.role == "alice":
-            # We already compared as Alice with this peer: exactly one of a pair adjusts.
-            self.endpoint.abort(peer, session, ABORT_REFUSED, "role: already Alice")
-            self.record("refused", peer=peer, reason="already Alice for this pair")
-            return
+            if self.settings.node < peer:
+                # Both took the pair as Alice (their views of who was on the ground crossed):
+                # exactly one of a pair adjusts -- the lower node id keeps the role.
+                self.endpoint.abort(peer, session, ABORT_REFUSED, "role: already Alice")
+                self.record("refused", peer=peer, reason="already Alice for this pair")
+                return
+            self.record("yielded", peer=peer, reason="the peer has the lower node id")
         if known is not None:
             known.role = "bob"
+            known.conflicts.clear()  # as Bob we do not adjust for this peer
         try:
             self.budget.admit(self._budget_key(peer), self.clock.now())
         except BudgetExceededError as exc:
             self.endpoint.abort(peer, session, ABORT_REFUSED, "run budget")
             self.record("budget", peer=peer, error=str(exc))
             return
-        _, path = self._remaining_path()
-        path = point_as_segment(path)  # a hovering drone: a point
+        setups = self.chooser_setups.setdefault(peer, {})
+        self._answering += 1
         try:
-            bob = Bob(path, self.bob_keys, geographic=True)
-            await serve_bob(self.endpoint, peer, session, bob, timeout=self.settings.run_timeout_s)
+            hello = await self.endpoint.receive(peer, session)
+            try:
+                near = Hello.from_bytes(hello).horizon_m > 0
+            except ProtocolError:
+                near = False  # the machine will refuse it with the reason
+            async with self._radio.turn(ANSWER_NEAR if near else ANSWER_FULL):
+                self._sessions += 1
+                try:
+                    bob = Bob(self._bob_path, keys=self.bob_keys, setups=setups, geographic=True)
+                    report = await serve_bob(
+                        self.endpoint,
+                        peer,
+                        session,
+                        bob,
+                        timeout=self.settings.run_timeout_s,
+                        first=hello,
+                    )
+                finally:
+                    self._sessions -= 1
         except (ProtocolError, LinkError, ValueError) as exc:
             self.record("answer_failed", peer=peer, error=str(exc))
             return
-        self.record("answered", peer=peer)
+        except Exception as exc:  # nothing may stop the companion
+            log.exception("node %d: answering %d failed", self.settings.node, peer)
+            self.record("answer_failed", peer=peer, error=f"internal: {exc!r}")
+            return
+        finally:
+            self._answering -= 1
+            self._wake.set()
+            while len(setups) > SETUPS_PER_PEER:  # the oldest go first
+                setups.pop(next(iter(setups)))
+        self.record("answered", peer=peer, bytes=report.bytes_sent)

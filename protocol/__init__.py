@@ -1,44 +1,42 @@
 """Private drone deconfliction: the sans-IO cryptographic core.
 
 Pure state machines and value types; no sockets, no asyncio, no clocks.  Start reading at
-:mod:`protocol.comparison` (Veugen's secure comparison), which is built on
-:mod:`protocol.paillier`, :mod:`protocol.dgk` and :mod:`protocol.ecelgamal`.
+:mod:`protocol.intersection` (the path protocol and its two suites), then the sub-protocols it
+composes: :mod:`protocol.products`, :mod:`protocol.millionaire` and :mod:`protocol.gmw` on the
+OT layer (:mod:`protocol.ot`) for the compact suite; :mod:`protocol.comparison` (Veugen) and
+:mod:`protocol.hegates` on :mod:`protocol.paillier` and :mod:`protocol.dgk` for the paper suite.
 """
 
 from .comparison import ComparisonAlice, ComparisonBob
 from .dgk import DGKCiphertext, DGKPrivateKey, DGKPublicKey
-from .ecelgamal import ECCiphertext, ECPrivateKey, ECPublicKey
 from .errors import (
     InsecureParametersError,
     LocalProtocolError,
     ProtocolError,
     RemoteProtocolError,
 )
-from .gadgets import AND, OR, XOR, GateAlice, GateBob, OpenedShares
+from .intersection import Alice, Bob, BobKeys, Limits
 from .paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
 from .params import SecurityParameters
+from .wire import Suite
 
 __all__ = [
-    "AND",
-    "OR",
-    "XOR",
+    "Alice",
+    "Bob",
+    "BobKeys",
     "ComparisonAlice",
     "ComparisonBob",
     "DGKCiphertext",
     "DGKPrivateKey",
     "DGKPublicKey",
-    "ECCiphertext",
-    "ECPrivateKey",
-    "ECPublicKey",
-    "GateAlice",
-    "GateBob",
     "InsecureParametersError",
+    "Limits",
     "LocalProtocolError",
-    "OpenedShares",
     "PaillierCiphertext",
     "PaillierPrivateKey",
     "PaillierPublicKey",
     "ProtocolError",
     "RemoteProtocolError",
     "SecurityParameters",
+    "Suite",
 ]

@@ -55,6 +55,18 @@ def _compare(args: argparse.Namespace) -> int:
     return 0 if all(c["hits"] == c["plain_hits"] for c in result["cases"]) else 1
 
 
+def _sizes(text: str | None, *, default: tuple[int, ...]) -> tuple[int, ...]:
+    if text is None:
+        return default
+    try:
+        sizes = tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise ProtocolError(f"--sizes must be comma-separated integers, got {text!r}") from None
+    if not sizes or any(not 1 <= s <= 256 for s in sizes):
+        raise ProtocolError("--sizes must be between 1 and 256")
+    return sizes
+
+
 def _bench(args: argparse.Namespace) -> int:
     result: dict[str, object]
     if args.what == "crypto":
@@ -79,10 +91,17 @@ def _bench(args: argparse.Namespace) -> int:
         data = Path(args.data) if args.data else DEFAULT_DATA
         result = bench_paper(data, args.suite, progress=not args.quiet)
         text = format_paper(result)
+    elif args.what == "design":
+        from .bench_paths import bench_design, format_design
+
+        result = bench_design(
+            _sizes(args.sizes, default=(8,))[0], args.range or 99, progress=not args.quiet
+        )
+        text = format_design(result)
     else:
         from .bench_paths import bench_scaling, format_scaling
 
-        sizes = tuple(int(s) for s in args.sizes.split(","))
+        sizes = _sizes(args.sizes, default=(1, 2, 4, 8, 16, 32))
         result = bench_scaling(sizes, args.suite, args.range or 99, progress=not args.quiet)
         text = format_scaling(result)
     print(json.dumps(result, indent=2) if args.json else text)
@@ -105,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
         "--link",
         metavar="PROFILE",
         default=None,
-        help="run through the simulated radio: eu868-sf7, eu868-sf9, eu868-sf12, us915-sf7, "
+        help="run through the simulated radio: eu868-sf7, eu868-sf9, eu868-sf12, eu868-g3-sf7, "
+        "us915-sf7, "
         "us915-sf9 or ideal",
     )
     compare.add_argument("--loss", type=float, default=0.0, help="frame loss probability (--link)")
@@ -120,11 +140,18 @@ def main(argv: list[str] | None = None) -> int:
 
     bench = sub.add_parser("bench", help="benchmarks that print tables")
     bench.add_argument(
-        "what", choices=["crypto", "paper", "scaling", "link"], help="what to measure"
+        "what",
+        choices=["crypto", "paper", "scaling", "design", "link"],
+        help="what to measure",
     )
     bench.add_argument("--suite", choices=["compact", "paper"], default="compact")
     bench.add_argument("--data", help="directory with the paper's data (paper)")
-    bench.add_argument("--sizes", default="1,2,4,8,16,32", help="n = m values (scaling)")
+    bench.add_argument(
+        "--sizes",
+        default=None,
+        help="n = m values, comma-separated (scaling; default 1,2,4,8,16,32), or the one size "
+        "(design; default 8)",
+    )
     bench.add_argument("--range", type=int, default=None, help="coordinate range (scaling)")
     bench.add_argument("--profiles", help="comma-separated link profiles (link; default all)")
     bench.add_argument("--json", action="store_true", help="machine-readable output")

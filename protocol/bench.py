@@ -3,7 +3,9 @@
 CPU time is ``time.process_time`` (this process only), reported as medians.  Bytes are the
 lengths of the real serialised messages (:mod:`protocol.loopback`), never object sizes.  Alice
 always works with public keys decoded from Bob's bytes, so her noise is computed the public (slow)
-way, as on a real drone.
+way, as on a real drone.  Both suites' comparisons run through the same sub-machines the path
+protocol ships (:class:`~protocol.comparison.ComparisonAlice` for the paper suite;
+:mod:`protocol.millionaire` and :mod:`protocol.gmw` on :mod:`protocol.ot` for the compact one).
 """
 
 from __future__ import annotations
@@ -16,13 +18,14 @@ from collections.abc import Callable
 from typing import Any
 
 from . import secp256k1 as ec
-from .comparison import ComparisonAlice, ComparisonBob, packed_count
+from .comparison import ComparisonAlice, ComparisonBob, pack_differences
 from .dgk import DGKPrivateKey, DGKPublicKey
-from .ecelgamal import ECPrivateKey, ECPublicKey
-from .loopback import Transcript, run_comparison
+from .loopback import Transcript, run_comparison, run_millionaires, run_ot_setup
+from .millionaire import DEFAULT_DIGIT_BITS, Shape
+from .ot.extension import chooser_extend, holder_extend
+from .ot.setup import ChooserSetup, HolderSetup
 from .paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
 from .params import SecurityParameters
-from .zerotest import C, ZeroTestPrivateKey, ZeroTestPublicKey
 
 Row = dict[str, Any]
 
@@ -41,18 +44,14 @@ def _progress(message: str) -> None:
     print(f"  ... {message}", file=sys.stderr, flush=True)
 
 
-def primitive_rows(
-    paillier: PaillierPrivateKey, dgk: DGKPrivateKey, ecsk: ECPrivateKey, repeat: int
-) -> list[Row]:
+def primitive_rows(paillier: PaillierPrivateKey, dgk: DGKPrivateKey, repeat: int) -> list[Row]:
     """Median CPU time of each primitive, public (Alice) and key-holder (Bob) paths."""
     pub = PaillierPublicKey.from_bytes(paillier.public_key.to_bytes())
     dpub = DGKPublicKey.from_bytes(dgk.public_key.to_bytes())
-    epub = ECPublicKey.from_bytes(ecsk.public_key.to_bytes())
     c = pub.encrypt(secrets.randbits(64))
     d = pub.encrypt(secrets.randbits(64))
     k40 = secrets.randbits(40)
     dc = dpub.encrypt(1)
-    ecc = epub.encrypt(1)
 
     def pooled_encrypt() -> PaillierCiphertext:
         pub.noise_pool.fill(1)
@@ -101,92 +100,116 @@ def primitive_rows(
             "s": median_cpu(lambda: dpub.blind(dc), repeat),
         },
         {"primitive": "dgk zero test", "s": median_cpu(lambda: dgk.is_zero(dc), repeat * 4)},
-        {"primitive": "ec keygen", "s": median_cpu(ECPrivateKey.generate, repeat)},
-        {"primitive": "ec encrypt, public", "s": median_cpu(lambda: epub.encrypt(1), repeat * 4)},
-        {
-            "primitive": "ec encrypt, key holder batch (per value)",
-            "s": median_cpu(lambda: ecsk.encrypt_batch([1] * 32), repeat) / 32,
-        },
-        {
-            "primitive": "ec blind + rerandomise",
-            "s": median_cpu(lambda: epub.blind(ecc), repeat * 4),
-        },
-        {"primitive": "ec zero test", "s": median_cpu(lambda: ecsk.is_zero(ecc), repeat * 4)},
         {
             "primitive": "secp256k1 variable-base multiply",
-            "s": median_cpu(lambda: ec.mul(epub.h, secrets.randbits(256)), repeat * 4),
+            "s": median_cpu(lambda: ec.mul(ec.base_mul(7), secrets.randbits(256)), repeat * 4),
         },
     ]
     return rows
 
 
-def comparison_row(
-    paillier: PaillierPrivateKey,
-    bits_sk: DGKPrivateKey | ECPrivateKey,
-    l: int,
-    kappa: int,
-    count: int,
-    repeat: int,
-    precomputed: bool,
-) -> Row:
-    """Median CPU per party and wire bytes of ``count`` comparisons in one batch."""
-    runs = []
-    for _ in range(repeat):
-        if isinstance(bits_sk, DGKPrivateKey):
-            dpub = DGKPublicKey.from_bytes(bits_sk.public_key.to_bytes())
-            runs.append(_one_comparison(paillier, bits_sk, dpub, l, kappa, count, precomputed))
-        else:
-            epub = ECPublicKey.from_bytes(bits_sk.public_key.to_bytes())
-            runs.append(_one_comparison(paillier, bits_sk, epub, l, kappa, count, precomputed))
-    last = runs[-1][0]
-    cpu_a = statistics.median(t.cpu_alice for t, _ in runs)
-    cpu_b = statistics.median(t.cpu_bob for t, _ in runs)
-    cpu_pre = statistics.median(pre for _, pre in runs)
+def ot_rows(repeat: int) -> tuple[list[Row], ChooserSetup, HolderSetup]:
+    """The one-time OT setup and the per-run extension: CPU per side and bytes."""
+    setup_runs = [run_ot_setup() for _ in range(max(3, repeat // 3))]
+    chooser, setup, _ = setup_runs[-1]
+    rows: list[Row] = [
+        {
+            "what": "OT setup (128 base OTs + 11 punctured trees), once per pair of drones",
+            "cpu_alice_ms": 1e3 * statistics.median(r[2].cpu_alice for r in setup_runs),
+            "cpu_bob_ms": 1e3 * statistics.median(r[2].cpu_bob for r in setup_runs),
+            "bytes_alice_to_bob": setup_runs[0][2].bytes_alice_to_bob,
+            "bytes_bob_to_alice": setup_runs[0][2].bytes_bob_to_alice,
+        }
+    ]
+    for count in (1000, 10000):
+        runs = []
+        for _ in range(max(3, repeat // 3)):
+            nonce = secrets.token_bytes(32)
+            start = time.process_time()
+            message, _ = chooser_extend(chooser, nonce, count)
+            mid = time.process_time()
+            holder_extend(setup, nonce, count, message)
+            end = time.process_time()
+            runs.append((end - mid, mid - start, len(message)))
+        rows.append(
+            {
+                "what": f"OT extension, {count} random OTs in one run",
+                "cpu_alice_ms": 1e3 * statistics.median(r[0] for r in runs),
+                "cpu_bob_ms": 1e3 * statistics.median(r[1] for r in runs),
+                "bytes_alice_to_bob": 0,
+                "bytes_bob_to_alice": runs[0][2],
+            }
+        )
+    return rows, chooser, setup
+
+
+def _per(transcripts: list[Transcript], count: int, suite: str, l: int, extra: str) -> Row:
+    last = transcripts[-1]
+    cpu_a = statistics.median(t.cpu_alice for t in transcripts)
+    cpu_b = statistics.median(t.cpu_bob for t in transcripts)
     return {
-        "backend": "dgk" if isinstance(bits_sk, DGKPrivateKey) else "ec",
+        "suite": suite,
         "l": l,
         "count": count,
-        "noise": "precomputed" if precomputed else "inline",
+        "detail": extra,
         "cpu_alice_ms": 1000 * cpu_a / count,
         "cpu_bob_ms": 1000 * cpu_b / count,
         "cpu_total_ms": 1000 * (cpu_a + cpu_b) / count,
-        "precompute_ms": 1000 * cpu_pre / count,
         "bytes_alice_to_bob": last.bytes_alice_to_bob / count,
         "bytes_bob_to_alice": last.bytes_bob_to_alice / count,
         "bytes_total": (last.bytes_alice_to_bob + last.bytes_bob_to_alice) / count,
         "messages": last.messages,
-        "round_trips": last.round_trips,
     }
 
 
-def _one_comparison(
-    paillier: PaillierPrivateKey,
-    bits_sk: ZeroTestPrivateKey[C],
-    bits_pub: ZeroTestPublicKey[C],
-    l: int,
-    kappa: int,
-    count: int,
-    precomputed: bool,
-) -> tuple[Transcript, float]:
-    """One batch on fresh public-key copies; returns the transcript and precompute CPU."""
-    pub = PaillierPublicKey.from_bytes(paillier.public_key.to_bytes())
-    lo, hi = -(2 ** (l - 1)), 2 ** (l - 1)
-    diffs = [
-        paillier.public_key.encrypt(lo + secrets.randbelow(hi - lo))
-        - paillier.public_key.encrypt(lo + secrets.randbelow(hi - lo))
-        for _ in range(count)
-    ]
-    inputs = [pub.ciphertext_from_bytes(x.rerandomize().to_bytes()) for x in diffs]
-    pre = 0.0
-    if precomputed:
-        start = time.process_time()
-        pub.noise_pool.fill(packed_count(pub, l, kappa, count))
-        if isinstance(bits_pub, DGKPublicKey):
-            bits_pub.noise_pool.fill(count * (l + 1))
-        pre = time.process_time() - start
-    alice = ComparisonAlice(pub, bits_pub, l, kappa, inputs)
-    bob = ComparisonBob(paillier, bits_sk, l, kappa, count)
-    return run_comparison(alice, bob, paillier.public_key), pre
+def paper_comparison_row(
+    paillier: PaillierPrivateKey, dgk: DGKPrivateKey, l: int, kappa: int, count: int, repeat: int
+) -> Row:
+    """Veugen on DGK: ``count`` comparisons of [x >= y] in one batch, fresh public keys."""
+    runs = []
+    for _ in range(repeat):
+        pub = PaillierPublicKey.from_bytes(paillier.public_key.to_bytes())
+        dpub = DGKPublicKey.from_bytes(dgk.public_key.to_bytes())
+        lo, hi = -(2 ** (l - 1)), 2 ** (l - 1)
+        diffs: list[PaillierCiphertext] = [
+            pub.ciphertext_from_bytes(
+                (
+                    paillier.public_key.encrypt(lo + secrets.randbelow(hi - lo))
+                    - paillier.public_key.encrypt(lo + secrets.randbelow(hi - lo))
+                )
+                .rerandomize()
+                .to_bytes()
+            )
+            for _ in range(count)
+        ]
+        packed = pack_differences(pub, diffs, l, kappa)
+        alice = ComparisonAlice(pub, dpub, l, kappa, packed, [[0]] * count)
+        bob = ComparisonBob(
+            paillier, dgk, l, kappa, [len(p.constants) for p in packed], [1] * count
+        )
+        runs.append(run_comparison(alice, bob))
+    return _per(runs, count, "paper", l, "Paillier + DGK, Veugen (XOR-shared result)")
+
+
+def compact_comparison_row(
+    chooser: ChooserSetup, holder: HolderSetup, l: int, count: int, repeat: int
+) -> Row:
+    """OT millionaires: ``count`` comparisons of Bob's l-bit value with Alice's, one run
+    (extension, digits, tables, AND tree; the result opened to Alice at the end)."""
+    runs = []
+    shape = Shape.of(l, DEFAULT_DIGIT_BITS, [1] * count)
+    for _ in range(repeat):
+        bob = [secrets.randbits(l) for _ in range(count)]
+        alice = [[secrets.randbits(l)] for _ in range(count)]
+        _, transcript = run_millionaires(chooser, holder, shape, bob, alice)
+        runs.append(transcript)
+    return _per(
+        runs,
+        count,
+        "compact",
+        l,
+        f"OT millionaires, {DEFAULT_DIGIT_BITS}-bit digits (setup cached)",
+    )
 
 
 def bench_crypto(repeat: int = 15, progress: bool = True) -> dict[str, Any]:
@@ -196,29 +219,17 @@ def bench_crypto(repeat: int = 15, progress: bool = True) -> dict[str, Any]:
     say("generating keys")
     paillier = PaillierPrivateKey.generate(params.paillier_bits)
     dgk = DGKPrivateKey.generate(params.dgk_bits, params.dgk_t)
-    ecsk = ECPrivateKey.generate()
     say("timing primitives")
-    primitives = primitive_rows(paillier, dgk, ecsk, repeat)
+    primitives = primitive_rows(paillier, dgk, repeat)
+    say("OT setup and extension")
+    ot, chooser, holder = ot_rows(repeat)
     comparisons: list[Row] = []
-    for bits_sk in (ecsk, dgk):
-        for l in (20, 42):
-            for count, precomputed in ((1, False), (1, True), (24, False)):
-                name = "dgk" if bits_sk is dgk else "ec"
-                say(
-                    f"comparison {name} l={l} batch={count} noise="
-                    f"{'precomputed' if precomputed else 'inline'}"
-                )
-                comparisons.append(
-                    comparison_row(
-                        paillier,
-                        bits_sk,
-                        l,
-                        params.kappa,
-                        count,
-                        repeat if count == 1 else max(3, repeat // 5),
-                        precomputed,
-                    )
-                )
+    for l in (20, 42):
+        for count in (1, 24):
+            runs = repeat if count == 1 else max(3, repeat // 5)
+            say(f"comparison l={l} batch={count}")
+            comparisons.append(paper_comparison_row(paillier, dgk, l, params.kappa, count, runs))
+            comparisons.append(compact_comparison_row(chooser, holder, l, count, runs))
     return {
         "params": {
             "paillier_bits": params.paillier_bits,
@@ -227,9 +238,11 @@ def bench_crypto(repeat: int = 15, progress: bool = True) -> dict[str, Any]:
             "dgk_u": dgk.public_key.u,
             "kappa": params.kappa,
             "curve": "secp256k1",
+            "ot": "SoftSpokenOT, 128-bit Delta in 10 blocks of 12 bits and one of 8",
             "repeat": repeat,
         },
         "primitives": primitives,
+        "ot": ot,
         "comparisons": comparisons,
     }
 
@@ -251,19 +264,30 @@ def format_crypto(result: dict[str, Any]) -> str:
         lines.append(f"| {row['primitive']} | {shown} |")
     lines += [
         "",
-        "| back-end | l | batch | noise | Alice ms | Bob ms | total ms | A->B B | B->A B "
-        "| total B | msgs |",
-        "|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| OT | Alice ms | Bob ms | A->B B | B->A B |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for r in result["ot"]:
+        lines.append(
+            f"| {r['what']} | {r['cpu_alice_ms']:.1f} | {r['cpu_bob_ms']:.1f} "
+            f"| {r['bytes_alice_to_bob']} | {r['bytes_bob_to_alice']} |"
+        )
+    lines += [
+        "",
+        "| suite | l | batch | Alice ms | Bob ms | total ms | A->B B | B->A B | total B | msgs |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in result["comparisons"]:
-        noise = r["noise"] + (
-            f" (+{r['precompute_ms']:.1f} ms before)" if r["precompute_ms"] else ""
-        )
         lines.append(
-            f"| {r['backend']} | {r['l']} | {r['count']} | {noise} | {r['cpu_alice_ms']:.1f} "
-            f"| {r['cpu_bob_ms']:.1f} | {r['cpu_total_ms']:.1f} | {r['bytes_alice_to_bob']:.0f} "
+            f"| {r['suite']} | {r['l']} | {r['count']} | {r['cpu_alice_ms']:.2f} "
+            f"| {r['cpu_bob_ms']:.2f} | {r['cpu_total_ms']:.2f} | {r['bytes_alice_to_bob']:.0f} "
             f"| {r['bytes_bob_to_alice']:.0f} | {r['bytes_total']:.0f} | {r['messages']} |"
         )
     lines.append("")
-    lines.append("Per-comparison figures; a batch of 24 shares its messages (3 in all).")
+    lines.append(
+        "Per-comparison figures (a batch shares its messages).  Paper: Paillier + DGK (Veugen), "
+        "XOR-shared result.  Compact: OT extension + 4-bit-digit millionaires + AND tree on "
+        "Beaver triples, result opened to Alice (1 bit); its one-time OT setup is in the OT "
+        "table, not in these rows."
+    )
     return "\n".join(lines)

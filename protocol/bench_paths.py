@@ -1,8 +1,9 @@
 """Benchmarks of the path protocol: ``bench paper`` and ``bench scaling``.
 
 Each run goes through :func:`protocol.loopback.run_paths`: bytes are the serialised frames
-(public keys included, they travel in messages 1 and 2), CPU is ``time.process_time`` of each
-party's steps.  Key generation happens once per drone and is reported on its own line.
+(public keys and setup ids included, they travel in messages 1 and 2), CPU is
+``time.process_time`` of each party's steps.  What two drones do once (the compact suite's OT
+setup, the paper suite's key generation) is reported on its own line, with its bytes.
 """
 
 from __future__ import annotations
@@ -14,10 +15,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .compare import Case, Party, load_cases, params_of, run_case
+from .compare import Case, Party, describe_once, load_cases, params_of, run_case
 from .formats import InputFormatError
-from .geometry import Point
+from .geometry import Point, path_hits
 from .grid import GridKind, GridSpec
+from .intersection import Alice, Bob
+from .loopback import run_paths
 from .wire import Suite
 
 DEFAULT_DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "anchor-data"
@@ -58,7 +61,7 @@ def _summary(results: list[dict[str, Any]], pairs: list[int]) -> dict[str, Any]:
         "median_bytes_alice_to_bob": ab,
         "median_bytes_bob_to_alice": ba,
         "median_bytes_total": statistics.median(x + y for _, _, x, y in per_pair),
-        "round_trips": max(r["round_trips"] for r in results),
+        "messages": max(r["messages"] for r in results),
     }
 
 
@@ -117,10 +120,9 @@ def bench_paper(
 def format_paper(result: dict[str, Any]) -> str:
     p, s = result["params"], result["pairs"]
     lines = [
-        f"Paper benchmark, suite {result['suite']} ({p['bits_scheme']}), Paillier "
-        f"{p['paillier_bits']} bits, kappa {p['kappa']}, l = {p['comparison_bits']} bits "
-        f"(range +-{p['grid_range']}); key generation once: Alice "
-        f"{p['keygen_s']['alice'] * 1e3:.1f} ms, Bob {p['keygen_s']['bob'] * 1e3:.0f} ms.",
+        f"Paper benchmark, suite {result['suite']} ({p['scheme']}), l = "
+        f"{p['comparison_bits']} bits (range +-{p['grid_range']}); once per pair of drones: "
+        f"{describe_once(p)}.",
         "",
         "| 30 single-segment pairs | this project | paper's code, measured here "
         "| paper, published |",
@@ -136,7 +138,7 @@ def format_paper(result: dict[str, Any]) -> str:
         f"| median bytes per pair, B->A | {s['median_bytes_bob_to_alice']:.0f} | 46 400 | - |",
         f"| median bytes per pair, total (keys included) | {s['median_bytes_total']:.0f} "
         f"| 86 800 + 20.2 MB key | 4634 (object sizes) |",
-        f"| round trips | {s['round_trips']:.0f} | about 48 | - |",
+        f"| messages | {s['messages']:.0f} | about 96 | - |",
         "| security | 112-bit, nothing leaked | 80-bit DGK, leaks every bit | - |",
         "",
         f"Routes (grid range +-{result['route_grid_range']}, "
@@ -190,7 +192,7 @@ def bench_scaling(
                 "bytes_per_pair": total / pairs,
                 "bytes_alice_to_bob": r["bytes_alice_to_bob"],
                 "bytes_bob_to_alice": r["bytes_bob_to_alice"],
-                "round_trips": r["round_trips"],
+                "messages": r["messages"],
                 "cpu_s_alice": r["cpu_s_alice"],
                 "cpu_s_bob": r["cpu_s_bob"],
             }
@@ -201,18 +203,78 @@ def bench_scaling(
 def format_scaling(result: dict[str, Any]) -> str:
     p = result["params"]
     lines = [
-        f"Scaling, suite {result['suite']} ({p['bits_scheme']}), random paths in "
-        f"[-{p['grid_range']}, {p['grid_range']}]^2, l = {p['comparison_bits']} bits, "
-        f"kappa {p['kappa']}:",
+        f"Scaling, suite {result['suite']} ({p['scheme']}), random paths in "
+        f"[-{p['grid_range']}, {p['grid_range']}]^2, l = {p['comparison_bits']} bits; once per "
+        f"pair of drones: {describe_once(p)}.  One run per size.",
         "",
-        "| n = m | pairs | correct | total bytes | bytes per pair | round trips "
+        "| n = m | pairs | correct | total bytes | bytes per pair | messages "
         "| Alice CPU s | Bob CPU s |",
         "|---:|---:|---|---:|---:|---:|---:|---:|",
     ]
     for r in result["rows"]:
         lines.append(
             f"| {r['segments']} | {r['pairs']} | {'yes' if r['correct'] else 'NO'} "
-            f"| {r['bytes_total']} | {r['bytes_per_pair']:.0f} | {r['round_trips']:.0f} "
+            f"| {r['bytes_total']} | {r['bytes_per_pair']:.0f} | {r['messages']} "
             f"| {r['cpu_s_alice']:.2f} | {r['cpu_s_bob']:.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def bench_design(size: int = 8, range_: int = 99, progress: bool = True) -> dict[str, Any]:
+    """The design study behind the compact suite: one size x size case, every variant.
+
+    Variants: the OT extension's block size (1 bit = IKNP's 128 bits per OT, 4, 8 = the
+    default; SoftSpokenOT sends 128 / k - 1 bits per OT and does 2^k work per block), the
+    millionaires' digit size, and the paper suite on the same paths.  Real bytes and CPU of
+    one run each (the OT setup made once per block size, not counted)."""
+    grid = GridSpec(GridKind.PLANE, range_)
+    case = Case(random_path(size, range_), random_path(size, range_), grid)
+    variants: list[tuple[str, int, int]] = [("compact", 8, w) for w in (2, 3, 4, 5, 6)]
+    variants += [("compact", 1, 4), ("compact", 4, 4), ("compact", 12, 4), ("paper", 0, 0)]
+    rows = []
+    parties: dict[int, Party] = {}
+    for suite, blocks, digits in variants:
+        _say(progress, f"{suite} blocks={blocks} digits={digits}")
+        if suite == "paper":
+            party = Party.generate(Suite.PAPER)
+            alice, bob = case.machines(party)
+        else:
+            party = parties.get(blocks) or Party.generate(Suite.COMPACT, block_bits=blocks)
+            parties[blocks] = party
+            alice = Alice(case.alice, grid, setup=party.setup, digit_bits=digits, block_bits=blocks)
+            bob = Bob(case.bob, setups=party.setups)
+        t = run_paths(alice, bob)
+        rows.append(
+            {
+                "suite": suite,
+                "ot_block_bits": blocks,
+                "digit_bits": digits,
+                "correct": alice.hits == path_hits(case.alice, case.bob),
+                "bytes_total": t.bytes_alice_to_bob + t.bytes_bob_to_alice,
+                "messages": t.messages,
+                "cpu_s_alice": t.cpu_alice,
+                "cpu_s_bob": t.cpu_bob,
+                "sizes": t.sizes,
+            }
+        )
+    return {"size": size, "grid_range": range_, "comparison_bits": grid.l, "rows": rows}
+
+
+def format_design(result: dict[str, Any]) -> str:
+    lines = [
+        f"Design study: one {result['size']} x {result['size']} case, coordinates in "
+        f"+-{result['grid_range']} (l = {result['comparison_bits']}); one run per row.",
+        "",
+        "| suite | OT block bits | digit bits | correct | total bytes | messages "
+        "| Alice CPU s | Bob CPU s |",
+        "|---|---:|---:|---|---:|---:|---:|---:|",
+    ]
+    for r in result["rows"]:
+        blocks = r["ot_block_bits"] or "-"
+        digits = r["digit_bits"] or "-"
+        lines.append(
+            f"| {r['suite']} | {blocks} | {digits} | {'yes' if r['correct'] else 'NO'} "
+            f"| {r['bytes_total']} | {r['messages']} | {r['cpu_s_alice']:.2f} "
+            f"| {r['cpu_s_bob']:.2f} |"
         )
     return "\n".join(lines)

@@ -1,9 +1,10 @@
 """``python -m protocol compare ALICE BOB``: run both parties in one process, on real bytes.
 
-Keys are generated once per invocation (reported separately, as a drone does it once) and
-reused across the cases of the files.  Each case runs the full eight-message protocol through
-:func:`protocol.loopback.run_paths`, so the byte counts are the frames a radio would carry and
-the CPU seconds are each party's own steps.
+The two drones' one-time material is made once per invocation and reported separately, as
+drones do it once per peer: the compact suite's OT setup (its bytes and CPU), the paper
+suite's keys.  Each case runs the whole protocol through :func:`protocol.loopback.run_paths`,
+so the byte counts are the frames a radio would carry (keys and setup ids included) and the
+CPU seconds are each party's own steps.
 """
 
 from __future__ import annotations
@@ -18,10 +19,11 @@ from typing import Any
 from .formats import InputFormatError, parse_paper_text, parse_plan, read_text
 from .geometry import Point, path_hits
 from .grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
-from .intersection import Alice, Bob, BobKeys, Limits, generate_bits_key
-from .loopback import run_paths
+from .intersection import Alice, Bob, BobKeys, Limits
+from .loopback import run_ot_setup, run_paths
+from .ot.setup import DEFAULT_BLOCK_BITS, ChooserSetup, HolderSetup
+from .suite_compact import blocks_of
 from .wire import Suite
-from .zerotest import ZeroTestPrivateKey
 
 SUITES = {"compact": Suite.COMPACT, "paper": Suite.PAPER}
 
@@ -43,8 +45,14 @@ class Case:
     def machines(self, party: Party, limits: Limits | None = None) -> tuple[Alice, Bob]:
         limits = limits or Limits()
         return (
-            Alice(self.alice, self.grid, party.alice_keys, limits=limits),
-            Bob(self.bob, party.bob_keys, geographic=self.bob_geographic, limits=limits),
+            Alice(self.alice, self.grid, suite=party.suite, setup=party.setup, limits=limits),
+            Bob(
+                self.bob,
+                keys=party.bob_keys,
+                setups=party.setups,
+                geographic=self.bob_geographic,
+                limits=limits,
+            ),
         )
 
 
@@ -93,21 +101,28 @@ def load_cases(
 
 @dataclass
 class Party:
-    """Long-lived keys of the two drones for one invocation."""
+    """What two drones keep between runs: the OT setup (compact) or Bob's keys (paper)."""
 
     suite: Suite
-    alice_keys: dict[Suite, ZeroTestPrivateKey[Any]]
-    bob_keys: BobKeys
-    keygen_s: dict[str, float]
+    bob_keys: BobKeys | None
+    setup: HolderSetup | None
+    setups: dict[bytes, ChooserSetup]
+    once: dict[str, float]  # one-time costs: CPU seconds and bytes
 
     @classmethod
-    def generate(cls, suite: Suite) -> Party:
-        start = time.process_time()
-        alice = {suite: generate_bits_key(suite)}
-        mid = time.process_time()
-        bob = BobKeys.generate((suite,))
-        end = time.process_time()
-        return cls(suite, alice, bob, {"alice": mid - start, "bob": end - mid})
+    def generate(cls, suite: Suite, *, block_bits: int = DEFAULT_BLOCK_BITS) -> Party:
+        if suite is Suite.PAPER:
+            start = time.process_time()
+            keys = BobKeys.generate()
+            return cls(suite, keys, None, {}, {"bob_keygen_s": time.process_time() - start})
+        chooser, setup, t = run_ot_setup(blocks_of(block_bits))
+        once = {
+            "setup_cpu_s_alice": t.cpu_alice,
+            "setup_cpu_s_bob": t.cpu_bob,
+            "setup_bytes_alice_to_bob": t.bytes_alice_to_bob,
+            "setup_bytes_bob_to_alice": t.bytes_bob_to_alice,
+        }
+        return cls(suite, None, setup, {chooser.setup_id: chooser}, once)
 
 
 def run_case(case: Case, party: Party, limits: Limits | None = None) -> dict[str, Any]:
@@ -119,7 +134,6 @@ def run_case(case: Case, party: Party, limits: Limits | None = None) -> dict[str
         "bytes_alice_to_bob": t.bytes_alice_to_bob,
         "bytes_bob_to_alice": t.bytes_bob_to_alice,
         "messages": t.messages,
-        "round_trips": t.round_trips,
         "cpu_s_alice": t.cpu_alice,
         "cpu_s_bob": t.cpu_bob,
         "message_sizes": dict(t.sizes),
@@ -127,17 +141,21 @@ def run_case(case: Case, party: Party, limits: Limits | None = None) -> dict[str
 
 
 def params_of(party: Party, grid: GridSpec, kappa: int = 40) -> dict[str, Any]:
-    bits = party.bob_keys.bits[party.suite].public_key
-    return {
-        "paillier_bits": int(party.bob_keys.paillier.public_key.n.bit_length()),
-        "bits_scheme": bits.name,
-        "kappa": kappa,
+    common = {
         "grid_kind": grid.kind.name.lower(),
         "grid_range": grid.range,
         "resolution_mm": grid.resolution_mm,
         "comparison_bits": grid.l,
-        "keygen_s": party.keygen_s,
+        "once": party.once,
     }
+    if party.bob_keys is not None:
+        return {
+            "scheme": "Paillier-2048 + DGK-2048 (t = 224)",
+            "paillier_bits": int(party.bob_keys.paillier.public_key.n.bit_length()),
+            "kappa": kappa,
+            **common,
+        }
+    return {"scheme": "OT extension (SoftSpokenOT, 128-bit Delta)", **common}
 
 
 def compare(
@@ -161,11 +179,20 @@ def compare(
     return {"suite": suite_name, "params": params_of(party, cases[0].grid), "cases": results}
 
 
+def describe_once(params: dict[str, Any]) -> str:
+    once = params["once"]
+    if "bob_keygen_s" in once:
+        return f"Bob's keys, {1e3 * once['bob_keygen_s']:.0f} ms CPU"
+    size = once["setup_bytes_alice_to_bob"] + once["setup_bytes_bob_to_alice"]
+    cpu = once["setup_cpu_s_alice"] + once["setup_cpu_s_bob"]
+    return f"OT setup, {size} B on the radio and {1e3 * cpu:.0f} ms CPU (not in the rows)"
+
+
 def format_compare(result: dict[str, Any]) -> str:
     p = result["params"]
     lines = [
-        f"suite {result['suite']} ({p['bits_scheme']}), Paillier {p['paillier_bits']} bits, "
-        f"kappa {p['kappa']}, grid range +-{p['grid_range']} -> l = {p['comparison_bits']} bits",
+        f"suite {result['suite']} ({p['scheme']}), grid range +-{p['grid_range']} "
+        f"-> l = {p['comparison_bits']} bits; once per pair of drones: {describe_once(p)}",
         "",
         "| case | hits (Alice's segments) | plaintext | A->B bytes | B->A bytes | msgs "
         "| Alice CPU s | Bob CPU s |",

@@ -1,42 +1,41 @@
-"""Secure comparison with XOR-shared output: Veugen's DGK-based protocol, batched, sans-IO.
+"""Secure comparison with XOR-shared output: Veugen's DGK-based protocol, batched (paper suite).
 
-Alice holds Paillier encryptions [x_j - y_j] under Bob's key, for signed l-bit x_j, y_j.  At the
-end Alice holds bits a_j and Bob bits b_j with a_j XOR b_j = [x_j >= y_j]; neither learns the
-result.  One and a half round trips for any number of comparisons:
+Alice holds Paillier encryptions of values v_j under Bob's key, several packed per ciphertext,
+and for each value one or more private thresholds theta.  At the end Alice holds bits a and Bob
+bits b with a XOR b = [v_j >= theta] for every (j, theta); neither learns the result.  One and
+a half round trips for any number of comparisons:
 
-1. Alice (:meth:`ComparisonAlice.mask`): z_j = x_j - y_j + 2^l in [1, 2^(l+1)); she adds a
-   uniform r_j of l + kappa + 1 bits, so d_j = z_j + r_j hides z_j to within 2^-kappa, and
-   packs as many d_j as fit into one Paillier plaintext (slots of l + kappa + 2 bits).
+1. Alice (:meth:`ComparisonAlice.mask`): z_j = v_j + 2^l in (0, 2^(l+1)); she adds a uniform
+   r_j of l + kappa + 1 bits, so d_j = z_j + r_j hides z_j to within 2^-kappa, slot by slot
+   (slots of l + kappa + 2 bits), and re-randomises.
 2. Bob (:meth:`ComparisonBob.decompose`): decrypts, keeps D_j = bit l of d_j, and sends the l
-   bits of d_j mod 2^l encrypted with the zero-test scheme (DGK or EC-ElGamal).
-3. Alice (:meth:`ComparisonAlice.compare_bits`): with s = 1 - 2 delta_A for a uniform bit
-   delta_A and w_i = d_i XOR r_i (Veugen 2012, eq. for c_i)
-       c_i    = s + d_i - r_i + 3 * sum_{k > i} w_k      (i = l-1 .. 0)
+   bits of d_j mod 2^l DGK-encrypted.
+3. Alice (:meth:`ComparisonAlice.compare_bits`): for each threshold she shifts her mask,
+   r' = r_j + theta (then d_j - r' = v_j - theta + 2^l: one decomposition serves every
+   threshold), and with s = 1 - 2 delta_A for a uniform bit delta_A and w_i = d_i XOR r'_i
+   (Veugen 2012)
+       c_i    = s + d_i - r'_i + 3 * sum_{k > i} w_k      (i = l-1 .. 0)
        c_(-1) = 3 (1 - delta_A) + 3 * sum_k w_k          (the equality term)
-   Exactly one c is zero iff delta_A XOR [d^ < r^] = 1, where d^ = d mod 2^l, r^ = r mod 2^l.
-   Each c is multiplied by a uniform rho != 0 and re-randomised, the l + 1 values shuffled.
+   Exactly one c is zero iff delta_A XOR [d^ < r'^] = 1 (d^ = d mod 2^l, r'^ = r' mod 2^l).
+   Each c is multiplied by a uniform rho != 0, re-randomised, the l + 1 values shuffled.
 4. Bob (:meth:`ComparisonBob.zero_test`): delta_B = [some c is zero].
 
-Since z_j >> l = (d_j >> l) - (r_j >> l) - [d^ < r^], bit l of z_j, which is [x_j >= y_j], is
-D_j XOR R_j XOR delta_A XOR delta_B: Alice's share is R_j XOR delta_A (R_j = bit l of r_j) and
-Bob's is D_j XOR delta_B.  No Paillier message flows back to Alice at all.
-
-What each side sees is argued in ``docs/security.md``.
+Since (d - r') >> l = D - R' - [d^ < r'^] (R' = bit l of r'), bit l of v - theta + 2^l, i.e.
+[v >= theta], is D xor R' xor delta_A xor delta_B: Alice's share is R' xor delta_A and Bob's
+D xor delta_B.  What each side sees is argued in ``docs/security.md``.
 """
 
 from __future__ import annotations
 
-import enum
 import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Generic
 
+from .dgk import DGKCiphertext, DGKPrivateKey, DGKPublicKey
 from .encoding import Reader
 from .errors import LocalProtocolError, RemoteProtocolError
 from .paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
 from .params import check_kappa
-from .zerotest import C, ZeroTestPrivateKey, ZeroTestPublicKey
 
 _system_random = secrets.SystemRandom()
 
@@ -51,31 +50,36 @@ def slots_per_ciphertext(key: PaillierPublicKey, l: int, kappa: int) -> int:
     return max(1, (key.n.bit_length() - 1) // slot_bits(l, kappa))
 
 
-def packed_count(key: PaillierPublicKey, l: int, kappa: int, count: int) -> int:
-    """Paillier ciphertexts in step 1 for ``count`` comparisons."""
-    per = slots_per_ciphertext(key, l, kappa)
-    return (count + per - 1) // per
-
-
-def check_shape(l: int, kappa: int, count: int, plaintext_modulus: int) -> None:
-    """Public parameters both sides must agree on; refuse what the schemes cannot carry."""
+def check_shape(l: int, plaintext_modulus: int) -> None:
+    """Refuse what the schemes cannot carry."""
     if not 1 <= l <= 256:
         raise LocalProtocolError(f"comparison bit length {l} out of range 1..256")
-    if count < 1:
-        raise LocalProtocolError("at least one comparison is needed")
     if 3 * l + 3 >= plaintext_modulus:
-        raise LocalProtocolError(f"bit scheme plaintext space too small for l = {l}")
+        raise LocalProtocolError(f"DGK plaintext space too small for l = {l}")
 
 
-class State(enum.Enum):
-    """States of either party; any error moves to FAILED, which is final."""
+@dataclass(frozen=True, slots=True)
+class PackedValues:
+    """One Paillier ciphertext whose slot s holds value_s - constants[s] (slot s at bit
+    s * (l + kappa + 2)); Alice adds the constants while masking."""
 
-    START = "start"
-    WAIT_BITS = "wait-bits"  # Alice, after step 1
-    WAIT_MASKED = "wait-masked"  # Bob, before step 2
-    WAIT_TESTS = "wait-tests"  # Bob, after step 2
-    DONE = "done"
-    FAILED = "failed"
+    ciphertext: PaillierCiphertext
+    constants: tuple[int, ...]
+
+
+def pack_differences(
+    key: PaillierPublicKey, differences: Sequence[PaillierCiphertext], l: int, kappa: int
+) -> list[PackedValues]:
+    """Pack single encrypted values by Horner's rule (one scalar multiplication each)."""
+    w, per = slot_bits(l, kappa), slots_per_ciphertext(key, l, kappa)
+    out = []
+    for start in range(0, len(differences), per):
+        group = differences[start : start + per]
+        acc = group[-1]
+        for c in reversed(group[:-1]):
+            acc = acc * (1 << w) + c
+        out.append(PackedValues(acc, (0,) * len(group)))
+    return out
 
 
 # --------------------------------------------------------------------------- messages
@@ -97,116 +101,110 @@ class MaskedDifferences:
 
 @dataclass(frozen=True, slots=True)
 class BitDecompositions:
-    """Step 2, Bob -> Alice: the l low bits of every d_j, encrypted (a key holder's batch)."""
+    """Step 2, Bob -> Alice: the l low bits of every d_j, DGK-encrypted."""
 
     payload: bytes
 
     def to_bytes(self) -> bytes:
         return self.payload
 
-    @classmethod
-    def read(cls, reader: Reader, size: int) -> BitDecompositions:
-        return cls(reader.take(size))
-
 
 @dataclass(frozen=True, slots=True)
-class BlindedTests(Generic[C]):
-    """Step 3, Alice -> Bob: l + 1 blinded, shuffled c values per comparison."""
+class BlindedTests:
+    """Step 3, Alice -> Bob: l + 1 blinded, shuffled c values per (value, threshold)."""
 
-    ciphertexts: tuple[C, ...]
+    ciphertexts: tuple[DGKCiphertext, ...]
 
     def to_bytes(self) -> bytes:
         return b"".join(c.to_bytes() for c in self.ciphertexts)
 
     @classmethod
-    def read(cls, reader: Reader, key: ZeroTestPublicKey[C], count: int) -> BlindedTests[C]:
+    def read(cls, reader: Reader, key: DGKPublicKey, count: int) -> BlindedTests:
         return cls(tuple(key.read_ciphertext(reader) for _ in range(count)))
 
 
 # --------------------------------------------------------------------------- Alice
 
 
-class ComparisonAlice(Generic[C]):
-    """The party without keys.  ``differences[j]`` encrypts x_j - y_j under Bob's key."""
+class ComparisonAlice:
+    """The party without keys.  ``thresholds[j]`` are Alice's thresholds for value j (in
+    packing order: slot by slot, ciphertext by ciphertext)."""
 
     def __init__(
         self,
         paillier: PaillierPublicKey,
-        bits: ZeroTestPublicKey[C],
+        bits: DGKPublicKey,
         l: int,
         kappa: int,
-        differences: Sequence[PaillierCiphertext],
+        values: Sequence[PackedValues],
+        thresholds: Sequence[Sequence[int]],
         *,
         insecure_for_tests: bool = False,
     ) -> None:
         check_kappa(kappa, insecure_for_tests)
-        check_shape(l, kappa, len(differences), bits.plaintext_modulus)
+        check_shape(l, bits.plaintext_modulus)
+        count = sum(len(p.constants) for p in values)
+        if count != len(thresholds) or not count or any(not t for t in thresholds):
+            raise LocalProtocolError("one non-empty threshold list per packed value")
+        if any(len(p.constants) > slots_per_ciphertext(paillier, l, kappa) for p in values):
+            raise LocalProtocolError("more slots than fit a Paillier plaintext")
         self.paillier, self.bits, self.l, self.kappa = paillier, bits, l, kappa
-        self._differences = list(differences)
-        self.count = len(differences)
-        self.state = State.START
+        self._values = list(values)
+        self.thresholds = [list(t) for t in thresholds]
+        self.count = count
         self._r: list[int] = []
-        self._delta: list[int] = []
-        self._shares: list[int] = []
+        self._shares: list[list[int]] = []
 
     @property
-    def shares(self) -> list[int]:
-        """Alice's XOR shares of [x_j >= y_j], available after step 3."""
-        if self.state is not State.DONE:
-            raise LocalProtocolError(f"shares are not ready in state {self.state.value}")
-        return list(self._shares)
-
-    def _expect(self, state: State) -> None:
-        if self.state is not state:
-            raise LocalProtocolError(f"Alice is in state {self.state.value}, not {state.value}")
+    def shares(self) -> list[list[int]]:
+        """Alice's XOR shares of [v_j >= theta], per value and threshold (after step 3)."""
+        if not self._shares:
+            raise LocalProtocolError("shares are ready after step 3")
+        return [list(s) for s in self._shares]
 
     def mask(self) -> MaskedDifferences:
-        """Step 1: [d_j] = [x_j - y_j] + 2^l + r_j, packed by Horner's rule, re-randomised."""
-        self._expect(State.START)
+        """Step 1: every slot gets its constant + 2^l + r_j; re-randomised."""
+        if self._r:
+            raise LocalProtocolError("already masked")
         l, w = self.l, slot_bits(self.l, self.kappa)
-        per = slots_per_ciphertext(self.paillier, l, self.kappa)
         self._r = [secrets.randbits(l + self.kappa + 1) for _ in range(self.count)]
-        packed: list[PaillierCiphertext] = []
-        for start in range(0, self.count, per):
-            group = range(start, min(start + per, self.count))
-            acc: PaillierCiphertext | None = None
-            offset = 0
-            for j in reversed(group):
-                acc = self._differences[j] if acc is None else acc * (1 << w) + self._differences[j]
-                offset = (offset << w) + (1 << l) + self._r[j]
-            assert acc is not None
-            packed.append((acc + offset).rerandomize())
-        self.state = State.WAIT_BITS
-        return MaskedDifferences(tuple(packed))
+        out = []
+        position = 0
+        for packed in self._values:
+            offset = sum(
+                (c + (1 << l) + self._r[position + s]) << (w * s)
+                for s, c in enumerate(packed.constants)
+            )
+            position += len(packed.constants)
+            out.append((packed.ciphertext + offset).rerandomize())
+        return MaskedDifferences(tuple(out))
 
     def bits_size(self) -> int:
-        """Exact byte size of Bob's step-2 message."""
         return self.bits.batch_size(self.count * self.l)
 
-    def compare_bits(self, msg: BitDecompositions) -> BlindedTests[C]:
-        """Step 3: the c_i of every comparison, blinded, re-randomised and shuffled."""
-        self._expect(State.WAIT_BITS)
-        try:
-            reader = Reader(msg.payload)
-            d_bits = self.bits.read_batch(reader, self.count * self.l)
-            reader.finish()
-        except RemoteProtocolError:
-            self.state = State.FAILED
-            raise
-        out: list[C] = []
-        for j in range(self.count):
-            delta = secrets.randbits(1)
-            self._delta.append(delta)
-            out.extend(self._blinded_cs(d_bits[j * self.l : (j + 1) * self.l], self._r[j], delta))
-            self._shares.append(((self._r[j] >> self.l) & 1) ^ delta)
-        self.state = State.DONE
+    def compare_bits(self, msg: BitDecompositions) -> BlindedTests:
+        """Step 3: the c_i of every (value, threshold), blinded, re-randomised, shuffled."""
+        if not self._r or self._shares:
+            raise LocalProtocolError("compare_bits follows mask, once")
+        reader = Reader(msg.payload)
+        d_bits = self.bits.read_batch(reader, self.count * self.l)
+        reader.finish()
+        out: list[DGKCiphertext] = []
+        for j, thetas in enumerate(self.thresholds):
+            d = d_bits[j * self.l : (j + 1) * self.l]
+            shares = []
+            for theta in thetas:
+                r = self._r[j] + theta
+                delta = secrets.randbits(1)
+                out += veugen_tests(self.bits, d, r, delta, self.l)
+                shares.append(((r >> self.l) & 1) ^ delta)
+            self._shares.append(shares)
         return BlindedTests(tuple(out))
 
-    def _blinded_cs(self, d: Sequence[C], r: int, delta: int) -> list[C]:
-        return veugen_tests(self.bits, d, r, delta, self.l)
 
-
-def veugen_tests(bits: ZeroTestPublicKey[C], d: Sequence[C], r: int, delta: int, l: int) -> list[C]:
+def veugen_tests(
+    bits: DGKPublicKey, d: Sequence[DGKCiphertext], r: int, delta: int, l: int
+) -> list[DGKCiphertext]:
     """Veugen's c_i and the equality term for one comparison, blinded and shuffled.
 
     ``d`` are Bob's encrypted bits of d mod 2^l, ``r`` Alice's mask (only its l low bits
@@ -215,7 +213,7 @@ def veugen_tests(bits: ZeroTestPublicKey[C], d: Sequence[C], r: int, delta: int,
     """
     s = 1 - 2 * delta
     three_w = bits.constant(0)  # 3 * sum_{k > i} w_k
-    cs: list[C] = []
+    cs: list[DGKCiphertext] = []
     for i in reversed(range(l)):
         r_i = (r >> i) & 1
         cs.append(d[i] + (s - r_i) + three_w)
@@ -230,76 +228,77 @@ def veugen_tests(bits: ZeroTestPublicKey[C], d: Sequence[C], r: int, delta: int,
 # --------------------------------------------------------------------------- Bob
 
 
-class ComparisonBob(Generic[C]):
-    """The key holder."""
+class ComparisonBob:
+    """The key holder.  ``slots[k]`` values in packed ciphertext k; ``thresholds[j]`` is how
+    many thresholds value j has (a public count)."""
 
     def __init__(
         self,
         paillier: PaillierPrivateKey,
-        bits: ZeroTestPrivateKey[C],
+        bits: DGKPrivateKey,
         l: int,
         kappa: int,
-        count: int,
+        slots: Sequence[int],
+        thresholds: Sequence[int],
         *,
         insecure_for_tests: bool = False,
     ) -> None:
         check_kappa(kappa, insecure_for_tests)
-        check_shape(l, kappa, count, bits.public_key.plaintext_modulus)
-        self.paillier, self.bits, self.l, self.kappa, self.count = paillier, bits, l, kappa, count
-        self.state = State.WAIT_MASKED
+        check_shape(l, bits.public_key.plaintext_modulus)
+        if sum(slots) != len(thresholds) or any(t < 1 for t in thresholds):
+            raise LocalProtocolError("one threshold count per packed value")
+        self.paillier, self.bits, self.l, self.kappa = paillier, bits, l, kappa
+        self.slots, self.thresholds = list(slots), list(thresholds)
         self._high: list[int] = []
-        self._shares: list[int] = []
+        self._shares: list[list[int]] = []
 
     @property
-    def shares(self) -> list[int]:
-        """Bob's XOR shares of [x_j >= y_j], available after step 4."""
-        if self.state is not State.DONE:
-            raise LocalProtocolError(f"shares are not ready in state {self.state.value}")
-        return list(self._shares)
-
-    def _expect(self, state: State) -> None:
-        if self.state is not state:
-            raise LocalProtocolError(f"Bob is in state {self.state.value}, not {state.value}")
+    def shares(self) -> list[list[int]]:
+        """Bob's XOR shares, per value and threshold (after step 4)."""
+        if not self._shares:
+            raise LocalProtocolError("shares are ready after step 4")
+        return [list(s) for s in self._shares]
 
     def masked_count(self) -> int:
-        return packed_count(self.paillier.public_key, self.l, self.kappa, self.count)
+        return len(self.slots)
 
     def decompose(self, msg: MaskedDifferences) -> BitDecompositions:
         """Step 2: decrypt, unpack, keep bit l, encrypt the l low bits of each d_j."""
-        self._expect(State.WAIT_MASKED)
+        if self._high:
+            raise LocalProtocolError("already decomposed")
         w = slot_bits(self.l, self.kappa)
-        per = slots_per_ciphertext(self.paillier.public_key, self.l, self.kappa)
-        if len(msg.ciphertexts) != self.masked_count():
-            self.state = State.FAILED
-            raise RemoteProtocolError("wrong number of masked differences")
+        if len(msg.ciphertexts) != len(self.slots):
+            raise RemoteProtocolError("wrong number of masked values")
         values: list[int] = []
-        for index, ct in enumerate(msg.ciphertexts):
+        for ct, slots in zip(msg.ciphertexts, self.slots, strict=True):
             packed = self.paillier.decrypt(ct)
-            slots = min(per, self.count - index * per)
             if packed >> (w * slots):
-                self.state = State.FAILED
-                raise RemoteProtocolError("masked difference out of range")
-            values.extend((packed >> (w * k)) & ((1 << w) - 1) for k in range(slots))
+                raise RemoteProtocolError("masked value out of range")
+            values += [(packed >> (w * s)) & ((1 << w) - 1) for s in range(slots)]
         self._high = [(d >> self.l) & 1 for d in values]
         low_bits = [(d >> i) & 1 for d in values for i in range(self.l)]
-        self.state = State.WAIT_TESTS
         return BitDecompositions(self.bits.encrypt_batch(low_bits))
 
     def tests_count(self) -> int:
-        return self.count * (self.l + 1)
+        return sum(self.thresholds) * (self.l + 1)
 
-    def zero_test(self, msg: BlindedTests[C]) -> None:
+    def zero_test(self, msg: BlindedTests) -> None:
         """Step 4: delta_B = [some c is zero]; every c is tested, no early exit."""
-        self._expect(State.WAIT_TESTS)
+        if not self._high or self._shares:
+            raise LocalProtocolError("zero_test follows decompose, once")
         if len(msg.ciphertexts) != self.tests_count():
-            self.state = State.FAILED
             raise RemoteProtocolError("wrong number of blinded tests")
         zeros = [self.bits.is_zero(c) for c in msg.ciphertexts]
         group = self.l + 1
-        for j in range(self.count):
-            found = sum(zeros[j * group : (j + 1) * group])
-            if found > 1:
-                self.state = State.FAILED
-                raise RemoteProtocolError("more than one zero in a comparison")
-            self._shares.append(self._high[j] ^ found)
-        self.state = State.DONE
+        position = 0
+        shares = []
+        for j, count in enumerate(self.thresholds):
+            per = []
+            for _ in range(count):
+                found = sum(zeros[position : position + group])
+                position += group
+                if found > 1:
+                    raise RemoteProtocolError("more than one zero in a comparison")
+                per.append(self._high[j] ^ found)
+            shares.append(per)
+        self._shares = shares

@@ -2,21 +2,19 @@
 
 Embedded defaults: Alice's and Bob's missions as WGS84 waypoints (degE7) around Zurich, the
 PX4 SITL default home.  Alice's hello carries the grid (tangent plane at her home, 0.5 m cells);
-Bob projects his own waypoints on it.  Both parties run the real eight-message protocol through
-its byte encoding (compact suite); the demo prints each message's size, each party's CPU time,
-and Alice's answer next to the plaintext predicate (which neither drone could compute alone).
-The flight companion (radio link, MAVLink) builds on this in later issues.
+Bob projects his own waypoints on it.  Both parties run the real protocol through its byte
+encoding (compact suite), twice: the first run with a peer carries the one-time OT setup, the
+second reuses it.  The demo prints each message's size, each party's CPU time, and Alice's
+answer next to the plaintext predicate (which neither drone could compute alone).
 """
 
 from __future__ import annotations
 
-import time
-
 from .geometry import path_hits
 from .grid import GridSpec
-from .intersection import Alice, Bob, BobKeys, generate_bits_key
+from .intersection import Alice, Bob
 from .loopback import run_paths
-from .wire import Suite
+from .ot.setup import ChooserSetup
 
 HOME_LAT, HOME_LON = 473_977_420, 85_455_940  # PX4 SITL default home (degE7)
 # Alice surveys east-west legs; Bob flies a north-south transit through her second leg.
@@ -36,11 +34,6 @@ BOB_MISSION = (
 
 
 def run_demo() -> int:
-    print("Generating keys (Bob: Paillier-2048 + secp256k1; Alice: secp256k1)...", flush=True)
-    start = time.process_time()
-    bob_keys = BobKeys.generate((Suite.COMPACT,))
-    alice_keys = {Suite.COMPACT: generate_bits_key(Suite.COMPACT)}
-    print(f"  key generation {1e3 * (time.process_time() - start):.0f} ms (once per drone)")
     grid = GridSpec.geo(HOME_LAT, HOME_LON, radius_m=2000)
     alice_path = grid.project_path(ALICE_MISSION)
     print(
@@ -51,18 +44,24 @@ def run_demo() -> int:
         f"Alice: {len(alice_path) - 1} segments; Bob: {len(BOB_MISSION) - 1} segments "
         "(Bob's waypoints never leave Bob)"
     )
-    alice = Alice(alice_path, grid, alice_keys)
-    bob = Bob(BOB_MISSION, bob_keys, geographic=True)
-    transcript = run_paths(alice, bob)
-    print("\n| message | bytes |\n|---|---:|")
-    for name, size in transcript.sizes:
-        print(f"| {name} | {size} |")
-    print(
-        f"\nTotal {transcript.bytes_alice_to_bob} B Alice->Bob, "
-        f"{transcript.bytes_bob_to_alice} B Bob->Alice, {transcript.messages} messages "
-        f"({transcript.round_trips:.0f} round trips); CPU Alice "
-        f"{transcript.cpu_alice:.2f} s, Bob {transcript.cpu_bob:.2f} s."
-    )
+    setups: dict[bytes, ChooserSetup] = {}
+    setup = None
+    runs = []
+    for label in ("first run (one-time OT setup)", "second run (setup cached)"):
+        alice = Alice(alice_path, grid, setup=setup)
+        bob = Bob(BOB_MISSION, setups=setups, geographic=True)
+        runs.append((label, run_paths(alice, bob)))
+        setup = alice.setup
+    print("\n| message | " + " | ".join(label for label, _ in runs) + " |")
+    print("|---|" + "---:|" * len(runs))
+    for row in zip(*(t.sizes for _, t in runs), strict=True):
+        print(f"| {row[0][0]} | " + " | ".join(str(size) for _, size in row) + " |")
+    for label, t in runs:
+        print(
+            f"\n{label}: {t.bytes_alice_to_bob} B Alice->Bob, {t.bytes_bob_to_alice} B "
+            f"Bob->Alice, {t.messages} messages; CPU Alice {1e3 * t.cpu_alice:.0f} ms, "
+            f"Bob {1e3 * t.cpu_bob:.0f} ms."
+        )
     plain = path_hits(alice_path, grid.project_path(BOB_MISSION))
     print("\nAlice learns, per segment of her mission:")
     for index, (hit, truth) in enumerate(zip(alice.hits, plain, strict=True)):

@@ -14,23 +14,18 @@ Everything here is plaintext and exact (Python integers, no floating point).  Tw
   - ``proj(A, B, P) = (P - A) . e`` with e = B - A -- where Bob's point lies along Alice's
     segment, used only to decide collinear overlap.
 
-The circuit (see ``docs/security.md``): with G = [o >= 0], P = [o >= 1], Z = G xor P = [o = 0],
-
-    s12 = 1 - P1 P2 - (1 - G1)(1 - G2)         (C and D not strictly on one side of AB)
-    s34 = 1 - P3 P4 - (1 - G3)(1 - G4)         (A and B not strictly on one side of CD)
-    col = Z1 Z2  (A != B)   or   Z3 Z4  (A = B)
-    w   = L_C L_D + H_C H_D,   L = [t < 0], H = [t >= T + 1]   (projection misses [0, T])
-    I   = s12 s34 - col w
-
-For A = B the projection uses e = (1, K) with K larger than any coordinate difference and
-T = 0: an injective, order-preserving key along any line through A.  :func:`circuit` evaluates
-this on plaintext and is tested against :func:`segments_intersect` and shapely.
+The circuit that decides a segment pair from the signs of these values is
+:mod:`protocol.pathcircuit`; :func:`circuit` evaluates it on plain bits and is tested against
+:func:`segments_intersect` and shapely.  For A = B the projection uses e = (1, K) with K larger
+than any coordinate difference and T = 0: an injective, order-preserving key along any line
+through A.
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass
+from fractions import Fraction
 
 Point = tuple[int, int]
 Polyline = tuple[Point, ...]
@@ -98,34 +93,114 @@ def projection_key(a: Point, b: Point, span: int) -> tuple[int, int, int, int]:
     return ex, ey, -(ex * a[0] + ey * a[1]), ex * ex + ey * ey
 
 
-@dataclass(frozen=True, slots=True)
-class SignBits:
-    """G = [o >= 0] and P = [o >= 1] of one orientation value."""
-
-    g: int
-    p: int
-
-    @property
-    def z(self) -> int:
-        return self.g ^ self.p
-
-    @classmethod
-    def of(cls, o: int) -> SignBits:
-        return cls(int(o >= 0), int(o >= 1))
-
-
-def side_test(first: SignBits, second: SignBits) -> int:
-    """s = 1 - P1 P2 - (1 - G1)(1 - G2): the two points are not strictly on one side."""
-    return 1 - first.p * second.p - (1 - first.g) * (1 - second.g)
+def comparison_bits(a: Point, b: Point, c: Point, d: Point, span: int) -> list[int]:
+    """The input bits of :func:`protocol.pathcircuit.segments_meet` for one segment pair:
+    P, Z of o1 .. o4, then L, H of t_C and t_D."""
+    bits = []
+    for o in (orient(a, b, c), orient(a, b, d), orient(c, d, a), orient(c, d, b)):
+        bits += [int(o > 0), int(o == 0)]
+    ex, ey, off, t_max = projection_key(a, b, span)
+    for p in (c, d):
+        t = ex * p[0] + ey * p[1] + off
+        bits += [int(t < 0), int(t > t_max)]
+    return bits
 
 
 def circuit(a: Point, b: Point, c: Point, d: Point, span: int) -> int:
-    """The protocol's formula I = s12 s34 - col w on plaintext (see the module docstring)."""
-    o1, o2 = SignBits.of(orient(a, b, c)), SignBits.of(orient(a, b, d))
-    o3, o4 = SignBits.of(orient(c, d, a)), SignBits.of(orient(c, d, b))
-    ex, ey, off, t_max = projection_key(a, b, span)
-    t_c, t_d = ex * c[0] + ey * c[1] + off, ex * d[0] + ey * d[1] + off
-    low = int(t_c < 0) * int(t_d < 0)
-    high = int(t_c >= t_max + 1) * int(t_d >= t_max + 1)
-    col = o1.z * o2.z if a != b else o3.z * o4.z
-    return side_test(o1, o2) * side_test(o3, o4) - col * (low + high)
+    """The protocol's circuit (:mod:`protocol.pathcircuit`) evaluated on plain bits."""
+    from .circuit import Circuit
+    from .pathcircuit import Orient, Proj, segments_meet
+
+    c_ = Circuit()
+    wires = [c_.input() for _ in range(12)]
+    o1, o2, o3, o4 = (Orient(wires[2 * j], wires[2 * j + 1]) for j in range(4))
+    c_.output(
+        segments_meet(c_, o1, o2, o3, o4, Proj(wires[8], wires[9]), Proj(wires[10], wires[11]))
+    )
+    return c_.evaluate(comparison_bits(a, b, c, d, span))[0]
+
+
+# --------------------------------------------------------------------------- the public box
+
+
+FPoint = tuple[Fraction, Fraction]
+
+
+def _clip(p: Point, q: Point, r: int) -> tuple[FPoint, FPoint] | None:
+    """Liang-Barsky: the part of segment pq inside [-r, r]^2, exactly (None if none)."""
+    t0, t1 = Fraction(0), Fraction(1)
+    dx, dy = q[0] - p[0], q[1] - p[1]
+    for step, room in ((-dx, p[0] + r), (dx, r - p[0]), (-dy, p[1] + r), (dy, r - p[1])):
+        if step == 0:
+            if room < 0:
+                return None
+            continue
+        t = Fraction(room, step)
+        if step < 0:
+            t0 = max(t0, t)
+        else:
+            t1 = min(t1, t)
+        if t0 > t1:
+            return None
+    return (p[0] + t0 * dx, p[1] + t0 * dy), (p[0] + t1 * dx, p[1] + t1 * dy)
+
+
+def _round_in(point: FPoint, r: int) -> Point:
+    return (max(-r, min(r, round(point[0]))), max(-r, min(r, round(point[1]))))
+
+
+def _perimeter(p: Point, r: int) -> int:
+    """Position of a boundary point along the box edge, counter-clockwise from (r, -r)."""
+    x, y = p
+    if x == r:
+        return y + r
+    if y == r:
+        return 2 * r + (r - x)
+    if x == -r:
+        return 4 * r + (r - y)
+    return 6 * r + (x + r)
+
+
+def _walk(p: Point, q: Point, r: int) -> list[Point]:
+    """Corners passed going from boundary point p to boundary point q the shorter way."""
+    corners = [(r, r), (-r, r), (-r, -r), (r, -r)]  # at perimeter 2r, 4r, 6r, 8r = 0
+    total = 8 * r
+    a, b = _perimeter(p, r), _perimeter(q, r)
+    forward = (b - a) % total
+    out = []
+    if forward <= total - forward:
+        for k, corner in enumerate(corners):
+            if 0 < (2 * r * (k + 1) - a) % total < forward:
+                out.append(corner)
+        out.sort(key=lambda c: (_perimeter(c, r) - a) % total)
+    else:
+        for k, corner in enumerate(corners):
+            if 0 < (a - 2 * r * (k + 1)) % total < total - forward:
+                out.append(corner)
+        out.sort(key=lambda c: (a - _perimeter(c, r)) % total)
+    return out
+
+
+def clip_to_box(path: Sequence[Point], r: int) -> tuple[Point, ...]:
+    """Bob's path as far as it lies in the public box [-r, r]^2.
+
+    Segments inside are kept exactly.  A segment that leaves the box is cut at the edge and the
+    cut point rounded to the grid (at most half a cell, as every waypoint is); where the path is
+    outside, it is replaced by a walk along the edge, which Alice's path (inside the box) can
+    only touch where it reaches the edge itself -- a false alarm at worst, never a missed
+    crossing.  A path entirely outside becomes the single corner (r, r).
+    """
+    if all(abs(x) <= r and abs(y) <= r for x, y in path):
+        return tuple(path)
+    out: list[Point] = []
+    for p, q in itertools.pairwise(path):
+        part = _clip(p, q, r)
+        if part is None:
+            continue
+        a, b = _round_in(part[0], r), _round_in(part[1], r)
+        if out and out[-1] != a:
+            out += _walk(out[-1], a, r)
+        if not out or out[-1] != a:
+            out.append(a)
+        out.append(b)
+    return tuple(out) if out else ((r, r), (r, r))

@@ -100,8 +100,9 @@ class GridSpec:
             if abs(x) > self.range or abs(y) > self.range:
                 raise InputRangeError(f"point ({x}, {y}) outside the grid range +-{self.range}")
 
-    def project(self, lat_e7: int, lon_e7: int) -> Point:
-        """East/north grid cell of a WGS84 point (altitude 0), refused outside the range."""
+    def project(self, lat_e7: int, lon_e7: int, *, checked: bool = True) -> Point:
+        """East/north grid cell of a WGS84 point (altitude 0); refused outside the range
+        unless ``checked`` is False (Bob cuts his path to the box himself)."""
         if self.kind is not GridKind.GEO:
             raise InputRangeError("this grid takes plane coordinates, not latitude/longitude")
         check_degE7(lat_e7, lon_e7)
@@ -117,11 +118,14 @@ class GridSpec:
         )
         scale = 1000 / self.resolution_mm
         point = (round(east * scale), round(north * scale))
-        self.check_points([point])
+        if checked:
+            self.check_points([point])
         return point
 
-    def project_path(self, points: Sequence[tuple[int, int]]) -> tuple[Point, ...]:
-        return tuple(self.project(lat, lon) for lat, lon in points)
+    def project_path(
+        self, points: Sequence[tuple[int, int]], *, checked: bool = True
+    ) -> tuple[Point, ...]:
+        return tuple(self.project(lat, lon, checked=checked) for lat, lon in points)
 
     # ----------------------------------------------------------------- wire encoding
 

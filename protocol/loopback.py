@@ -7,8 +7,9 @@ Pure: no sockets, no clocks other than the process CPU clock used for accounting
 
 from __future__ import annotations
 
+import secrets
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from typing import TypeVar
@@ -21,18 +22,19 @@ from .comparison import (
     MaskedDifferences,
 )
 from .encoding import Reader
-from .gadgets import GateAlice, GateBob, GateInputs, GateOutputs
+from .gmw import Gmw, rot_count
 from .intersection import Alice, Bob
-from .paillier import PaillierPublicKey
+from .millionaire import LeavesAlice, LeavesBob, Shape, comparison_circuit
+from .ot.extension import ChooserRots, HolderRots, chooser_extend, holder_extend
+from .ot.setup import ChooserSetup, HolderSetup, HolderSetupStart, chooser_setup
 from .wire import MsgType
-from .zerotest import C
 
 T = TypeVar("T")
 
 
 @dataclass
 class Transcript:
-    """Bytes and CPU seconds per direction/party, message and round-trip counts."""
+    """Bytes and CPU seconds per direction/party, message counts and sizes."""
 
     bytes_alice_to_bob: int = 0
     bytes_bob_to_alice: int = 0
@@ -40,11 +42,6 @@ class Transcript:
     cpu_alice: float = 0.0
     cpu_bob: float = 0.0
     sizes: list[tuple[str, int]] = field(default_factory=list)
-
-    @property
-    def round_trips(self) -> float:
-        """A round trip is two messages (one each way)."""
-        return self.messages / 2
 
     def send(self, name: str, data: bytes, *, from_alice: bool) -> bytes:
         if from_alice:
@@ -78,54 +75,43 @@ def _read_all(data: bytes, parse: Callable[[Reader], T]) -> T:
 
 
 def run_comparison(
-    alice: ComparisonAlice[C],
-    bob: ComparisonBob[C],
-    bob_paillier_view: PaillierPublicKey,
-    transcript: Transcript | None = None,
+    alice: ComparisonAlice, bob: ComparisonBob, transcript: Transcript | None = None
 ) -> Transcript:
-    """Steps 1-4 of the comparison; ``bob_paillier_view`` decodes Alice's ciphertexts."""
+    """Steps 1-4 of the comparison, every message through its bytes."""
     t = transcript or Transcript()
     wire = t.send("masked", t.alice(lambda: alice.mask().to_bytes()), from_alice=True)
+    paillier = bob.paillier.public_key
     masked = t.bob(
-        lambda: _read_all(
-            wire, lambda r: MaskedDifferences.read(r, bob_paillier_view, bob.masked_count())
-        )
+        lambda: _read_all(wire, lambda r: MaskedDifferences.read(r, paillier, bob.masked_count()))
     )
     wire = t.send("bits", t.bob(lambda: bob.decompose(masked).to_bytes()), from_alice=False)
-    bits = t.alice(lambda: _read_all(wire, lambda r: BitDecompositions.read(r, len(wire))))
-    wire = t.send("tests", t.alice(lambda: alice.compare_bits(bits).to_bytes()), from_alice=True)
-    tests = t.bob(
-        lambda: _read_all(
-            wire, lambda r: BlindedTests.read(r, bob.bits.public_key, bob.tests_count())
-        )
+    wire = t.send(
+        "tests",
+        t.alice(lambda: alice.compare_bits(BitDecompositions(wire)).to_bytes()),
+        from_alice=True,
     )
+    key = bob.bits.public_key
+    tests = t.bob(lambda: _read_all(wire, lambda r: BlindedTests.read(r, key, bob.tests_count())))
     t.bob(lambda: bob.zero_test(tests))
     return t
 
 
-def run_gates(
-    alice: GateAlice[C], bob: GateBob[C], transcript: Transcript | None = None
-) -> tuple[list[int], list[int], Transcript]:
-    """One round trip of two-input gates; returns (Alice's shares, Bob's shares, transcript)."""
+def run_ot_setup(
+    blocks: Sequence[int] | None = None, transcript: Transcript | None = None
+) -> tuple[ChooserSetup, HolderSetup, Transcript]:
+    """The one-time OT setup of a pair (Alice holds, Bob chooses), through its bytes."""
     t = transcript or Transcript()
-    wire = t.send("gate-inputs", t.bob(lambda: bob.offer().to_bytes()), from_alice=False)
-    outputs = t.alice(lambda: alice.evaluate(GateInputs(wire)).to_bytes())
-    wire = t.send("gate-outputs", outputs, from_alice=True)
-    count = len(bob.inputs)
-    bob_shares = t.bob(
-        lambda: bob.finish(
-            _read_all(wire, lambda r: GateOutputs.read(r, bob.bits.public_key, count))
-        )
-    )
-    assert alice.outputs is not None
-    return list(alice.outputs), bob_shares, t
+    holder = t.alice(lambda: HolderSetupStart() if blocks is None else HolderSetupStart(blocks))
+    hello = t.send("setup", t.alice(holder.message), from_alice=True)
+    chooser, reply = t.bob(lambda: chooser_setup(hello, holder.blocks))
+    t.send("setup reply", reply, from_alice=False)
+    return chooser, t.alice(lambda: holder.finish(reply)), t
 
 
 def run_paths(alice: Alice, bob: Bob, transcript: Transcript | None = None) -> Transcript:
     """Both parties of the path protocol, frame by frame, until Alice has her answer."""
     t = transcript if transcript is not None else Transcript()
-    names = iter(MsgType)
-    frame: bytes | None = t.send(next(names).name, t.alice(alice.start), from_alice=True)
+    frame: bytes | None = t.send("HELLO", t.alice(alice.start), from_alice=True)
     from_alice = True
     while frame is not None:
         receiver = bob if from_alice else alice
@@ -134,5 +120,76 @@ def run_paths(alice: Alice, bob: Bob, transcript: Transcript | None = None) -> T
         frame = account(partial(receiver.receive, current))
         from_alice = not from_alice
         if frame is not None:
-            t.send(next(names).name, frame, from_alice=from_alice)
+            t.send(MsgType(frame[3]).name, frame, from_alice=from_alice)
     return t
+
+
+def run_millionaires(
+    chooser: ChooserSetup,
+    holder: HolderSetup,
+    shape: Shape,
+    bob_values: Sequence[int],
+    alice_values: Sequence[Sequence[int]],
+    *,
+    need_eq: bool = False,
+    transcript: Transcript | None = None,
+) -> tuple[list[int], Transcript]:
+    """The compact suite's comparisons alone: OT extension, leaves, tree (GMW), and the
+    outputs opened to Alice ([b > t], then [b = t] with ``need_eq``, per value and
+    threshold).  Returns Alice's plain outputs and the transcript."""
+    t = transcript or Transcript()
+    circuit = comparison_circuit(shape, need_eq=need_eq)
+    total = shape.rots + rot_count(circuit)
+    nonce = secrets.token_bytes(32)
+
+    def bob_first() -> tuple[bytes, LeavesBob, ChooserRots]:
+        message, rots = chooser_extend(chooser, nonce, total)
+        leaves = LeavesBob(
+            shape, bob_values, ChooserRots(rots.choices[: shape.rots], rots.keys[: shape.rots])
+        )
+        triples = ChooserRots(rots.choices[shape.rots :], rots.keys[shape.rots :])
+        return message + leaves.corrections(), leaves, triples
+
+    wire, bob_leaves, bob_triples = t.bob(bob_first)
+    t.send("extension+digits", wire, from_alice=False)
+    split = len(wire) - shape.correction_size()
+
+    def alice_first() -> tuple[bytes, Gmw]:
+        rots = holder_extend(holder, nonce, total, wire[:split])
+        leaves = LeavesAlice(
+            shape, alice_values, HolderRots(rots.keys0[: shape.rots], rots.keys1[: shape.rots])
+        )
+        tables, shares = leaves.tables(wire[split:])
+        inputs = [bit for v in shares for th in v for pair in th for bit in pair]
+        gmw = Gmw(
+            circuit,
+            alice=True,
+            rots=HolderRots(rots.keys0[shape.rots :], rots.keys1[shape.rots :]),
+            inputs=inputs,
+        )
+        return tables + gmw.send(), gmw
+
+    wire, alice_gmw = t.alice(alice_first)
+    t.send("tables", wire, from_alice=True)
+    size = shape.table_size()
+
+    def bob_tables() -> tuple[bytes, Gmw]:
+        shares = bob_leaves.shares(wire[:size])
+        inputs = [bit for v in shares for th in v for pair in th for bit in pair]
+        gmw = Gmw(circuit, alice=False, rots=bob_triples, inputs=inputs)
+        gmw.receive(wire[size:])
+        return gmw.send(), gmw
+
+    wire, bob_gmw = t.bob(bob_tables)
+    t.send("round", wire, from_alice=False)
+    current, other = alice_gmw, bob_gmw
+    while not alice_gmw.finished:
+        message = wire
+        t_account = t.alice if current is alice_gmw else t.bob
+        t_account(partial(current.receive, message))
+        if alice_gmw.finished:
+            break
+        wire = t_account(current.send)
+        t.send("round", wire, from_alice=current is alice_gmw)
+        current, other = other, current
+    return alice_gmw.outputs(), t

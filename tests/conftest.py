@@ -1,14 +1,14 @@
-"""Shared fixtures: one real 2048-bit key set per test session (112-bit parameters)."""
+"""Shared fixtures: one real key set and one real OT setup per test session (112-bit floor)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import pytest
 
 from protocol.dgk import DGKPrivateKey, DGKPublicKey
-from protocol.ecelgamal import ECPrivateKey, ECPublicKey
+from protocol.intersection import DGK_BITS, BobKeys
+from protocol.ot.setup import ChooserSetup, HolderSetup, HolderSetupStart, chooser_setup
 from protocol.paillier import PaillierPrivateKey, PaillierPublicKey
 
 
@@ -18,49 +18,40 @@ class Keys:
 
     paillier: PaillierPrivateKey
     dgk: DGKPrivateKey
-    ec: ECPrivateKey
     paillier_pub: PaillierPublicKey
     dgk_pub: DGKPublicKey
-    ec_pub: ECPublicKey
 
-    def backend(self, name: str) -> tuple[Any, Any]:
-        """(Bob's zero-test private key, Alice's public view) for 'ec' or 'dgk'."""
-        if name == "ec":
-            return self.ec, self.ec_pub
-        return self.dgk, self.dgk_pub
+    @property
+    def bob(self) -> BobKeys:
+        return BobKeys(self.paillier, self.dgk)
 
 
 @pytest.fixture(scope="session")
 def keys() -> Keys:
     paillier = PaillierPrivateKey.generate()
-    dgk = DGKPrivateKey.generate()
-    ec = ECPrivateKey.generate()
+    dgk = DGKPrivateKey.generate(comparison_bits=DGK_BITS)
     return Keys(
         paillier,
         dgk,
-        ec,
         PaillierPublicKey.from_bytes(paillier.public_key.to_bytes()),
         DGKPublicKey.from_bytes(dgk.public_key.to_bytes()),
-        ECPublicKey.from_bytes(ec.public_key.to_bytes()),
     )
 
 
 @dataclass(frozen=True)
-class PathKeys:
-    """Long-lived keys of two drones for the path protocol (both suites)."""
+class OtPair:
+    """One OT setup between two drones: Bob's (chooser) and Alice's (Delta holder) halves."""
 
-    bob: Any  # protocol.intersection.BobKeys
-    alice: dict[Any, Any]  # Suite -> Alice's zero-test private key
+    chooser: ChooserSetup
+    holder: HolderSetup
+
+    @property
+    def setups(self) -> dict[bytes, ChooserSetup]:
+        return {self.chooser.setup_id: self.chooser}
 
 
 @pytest.fixture(scope="session")
-def path_keys(keys: Keys) -> PathKeys:
-    from protocol.intersection import DGK_COUNT_BITS, BobKeys
-    from protocol.wire import Suite
-
-    bob = BobKeys(keys.paillier, {Suite.COMPACT: keys.ec, Suite.PAPER: keys.dgk})
-    alice = {
-        Suite.COMPACT: ECPrivateKey.generate(),
-        Suite.PAPER: DGKPrivateKey.generate(comparison_bits=DGK_COUNT_BITS),
-    }
-    return PathKeys(bob, alice)
+def ot_pair() -> OtPair:
+    start = HolderSetupStart()
+    chooser, reply = chooser_setup(start.message(), start.blocks)
+    return OtPair(chooser, start.finish(reply))

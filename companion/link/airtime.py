@@ -7,9 +7,9 @@ Semtech AN1200.13 (LoRa modem designer's guide), for a frame of ``PL`` bytes::
     n_payload  = 8 + max(ceil((8 PL - 4 SF + 28 + 16 CRC - 20 IH) / (4 (SF - 2 DE))) (CR + 4), 0)
 
 with explicit header (IH = 0), CRC on, and low-data-rate optimisation DE = 1 when T_sym > 16 ms.
-The regulatory side: EU868 (868.0-868.6 MHz) allows 1 % duty cycle, enforced here as a
-transmit budget over a sliding hour; US915 has no duty cycle but a 400 ms dwell time per
-frame, which caps the frame size at slow spreading factors.
+The regulatory side: EU868 (868.0-868.6 MHz) allows 1 % duty cycle, and its 869.4-869.65 MHz
+sub-band (g3) 10 %, enforced here as a transmit budget over a sliding hour; US915 has no duty
+cycle but a 400 ms dwell time per frame, which caps the frame size at slow spreading factors.
 """
 
 from __future__ import annotations
@@ -91,6 +91,14 @@ def _lora(name: str, sf: int, region: str) -> LinkProfile:
         return LinkProfile(
             name, f"LoRa SF{sf}/125 kHz CR4/5, EU868 1 % duty cycle", sf, 125_000, duty_cycle=0.01
         )
+    if region == "eu868-g3":
+        return LinkProfile(
+            name,
+            f"LoRa SF{sf}/125 kHz CR4/5, EU868 869.4-869.65 MHz sub-band, 10 % duty cycle",
+            sf,
+            125_000,
+            duty_cycle=0.10,
+        )
     return LinkProfile(
         name, f"LoRa SF{sf}/125 kHz CR4/5, US915 400 ms dwell", sf, 125_000, dwell_s=0.400
     )
@@ -102,6 +110,7 @@ PROFILES: dict[str, LinkProfile] = {
         _lora("eu868-sf7", 7, "eu868"),
         _lora("eu868-sf9", 9, "eu868"),
         _lora("eu868-sf12", 12, "eu868"),
+        _lora("eu868-g3-sf7", 7, "eu868-g3"),
         _lora("us915-sf7", 7, "us915"),
         _lora("us915-sf9", 9, "us915"),
         LinkProfile(

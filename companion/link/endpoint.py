@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import random
 import secrets
 from collections import deque
@@ -47,6 +48,7 @@ ABORT_TIMEOUT = 2  # a time limit of the run passed
 ABORT_SHUTDOWN = 3  # the process is stopping
 ABORT_REFUSED = 4  # not now (run budget, busy)
 ABORT_LINK = 5  # the link gave up (retries exhausted)
+MAX_DEFERRALS = 60  # listen before talk gives up waiting after this many back-offs
 
 
 def _consume(future: asyncio.Future[float]) -> None:
@@ -155,6 +157,7 @@ class LinkEndpoint:
         self._timers: dict[int, RetransmissionTimer] = {}
         self._tasks: list[asyncio.Task[None]] = []
         self._running = False
+        self._last_traffic = -math.inf
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -218,6 +221,15 @@ class LinkEndpoint:
             self._enqueue(frame, control=True)
         self.close_session(peer, session)
         self._aborted[(peer, session)] = frame  # repeated to whoever still asks (like a RST)
+
+    def busy(self, quiet_s: float = 2.0) -> bool:
+        """A session is open, a message half received, or session traffic was heard in the
+        last ``quiet_s`` seconds: a beacon now would likely collide with somebody's run."""
+        return bool(
+            self._sessions
+            or self.receiver.pending()
+            or self.clock.now() - self._last_traffic < quiet_s
+        )
 
     def _session(self, peer: int, session: int) -> _Session:
         try:
@@ -351,6 +363,7 @@ class LinkEndpoint:
         return done
 
     async def _tx_loop(self) -> None:
+        deferred = 0
         while True:
             queue = self._control if self._control else self._data
             if not queue:
@@ -366,6 +379,14 @@ class LinkEndpoint:
                     await self.clock.wait_for(self._wake.wait(), start - now)
                 self.stats.duty_wait_s += self.clock.now() - now
                 continue  # re-evaluate: a control frame may have arrived
+            sense = getattr(self.transport, "channel_busy", None)
+            if sense is not None and sense() and deferred < MAX_DEFERRALS:
+                # Listen before talk: another radio is on the air (LoRa channel activity
+                # detection).  Back off a random few frames' worth and look again.
+                deferred += 1
+                await self.clock.sleep(_JITTER.uniform(0.02, 0.25))
+                continue
+            deferred = 0
             queue.popleft()
             if item.done.cancelled():
                 continue
@@ -395,10 +416,12 @@ class LinkEndpoint:
         except FrameError as exc:
             self.stats.drop(exc.reason)
             return
+        now = self.clock.now()
+        if frame.type is not FrameType.BEACON:
+            self._last_traffic = now  # a run on the air, ours or another pair's
         if frame.dst not in (self.node, BROADCAST):
             return  # overheard: another pair's traffic
         self.stats.frames_received += 1
-        now = self.clock.now()
         key = (frame.src, frame.session)
         sess = self._sessions.get(key)
         if sess is not None:

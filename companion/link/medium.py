@@ -76,6 +76,7 @@ class Channel:
     impairments: Impairments = field(default_factory=Impairments)
     seed: int | None = None
     collisions: bool = True
+    carrier_sense: bool = True  # radios detect channel activity before they transmit
     stats: ChannelStats = field(default_factory=ChannelStats)
 
     def __post_init__(self) -> None:
@@ -90,6 +91,11 @@ class Channel:
         self._air.append(tx)
         self.stats.transmitted += 1
         return tx
+
+    def busy(self, node: int, now: float) -> bool:
+        """Another node's frame is on the air at ``now`` (what LoRa channel activity
+        detection tells a radio before it transmits)."""
+        return any(t.src != node and t.start <= now < t.end for t in self._air)
 
     def end(self, tx: OnAir) -> list[tuple[int, float, bytes]]:
         """Who receives ``tx``: (node, delay after the end of transmission, bytes)."""
@@ -163,6 +169,10 @@ class SimTransport:
 
     def set_receiver(self, callback: Receiver) -> None:
         self.medium._receivers[self.node] = callback
+
+    def channel_busy(self) -> bool:
+        channel = self.medium.channel
+        return channel.carrier_sense and channel.busy(self.node, self.medium.clock.now())
 
     async def transmit(self, frame: bytes, airtime: float) -> None:
         clock = self.medium.clock

@@ -13,9 +13,10 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.failsafe import Action
 from companion.mock_autopilot import Faults
 from companion.replay import (
-    KINEMATIC_TOLERANCE_M,
+    RESOLVED_TOLERANCE_M,
     Scenario,
     ScenarioError,
     load_scenario,
@@ -36,44 +37,79 @@ def _replay(name: str) -> dict:  # type: ignore[type-arg]
     return json.loads(run.stdout)  # type: ignore[no-any-return]
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(
-    ("name", "climbers"),
-    [
-        ("crossing", {1}),
-        ("corridor", {1}),
-        ("no_conflict", set()),
-        ("three_drones", {1}),
-        ("ardupilot", {1}),
-        ("lossy_sf9", {1}),
-    ],
-)
-def test_scenario(name: str, climbers: set[int]) -> None:
-    report = _replay(name)
+def check(report: dict, climbers: dict[int, int], *, every_conflict: bool = True) -> None:  # type: ignore[type-arg]
+    """Every conflict resolved by the companion, none by luck or by a precaution; exactly
+    the drones in ``climbers`` climb, to the given level.  With ``every_conflict`` each climber
+    flags every segment that crosses another's path; in flight only what is still ahead of
+    both when they compare can be flagged (a leg the peer has left behind is no conflict)."""
     assert report["finished"], "the missions were not flown within the time limit"
     offset = report["offset_m"]
     for drone in report["drones"]:
         flagged, conflicting = set(drone["flagged_segments"]), set(drone["conflicting_segments"])
         assert flagged <= conflicting  # nothing flagged that the plain predicate clears
         if drone["id"] in climbers:
-            assert flagged == conflicting  # every true 2-D conflict of Alice's mission
+            assert flagged == conflicting if every_conflict else flagged  # Alice's 2-D conflicts
             assert drone["verified"] and drone["edits"]
-            assert drone["max_altitude_m"] >= 488.0 + 30.0 + offset - 0.5
+            assert set(drone["levels"].values()) == {climbers[drone["id"]]}
+            assert drone["max_altitude_m"] >= 488.0 + 30.0 + climbers[drone["id"]] * offset - 0.5
         else:
-            assert not drone["edits"]
+            assert not drone["edits"] and drone["verified"] is None
+        for event in drone["timeline"]:
+            assert event["t"] >= 0
     assert report["false_alarms"] == 0
+    assert report["precautionary_actions"] == 0
     for pair in report["pairs"]:
-        if pair["paths_cross"]:
+        if pair["conflict"]:
             # without the companion they would have met; with it, the offset separates them
-            assert pair["closest_approach_baseline_m"] < offset - KINEMATIC_TOLERANCE_M
-            assert pair["closest_approach_m"] >= offset - KINEMATIC_TOLERANCE_M
+            assert pair["closest_approach_baseline_m"] < offset - RESOLVED_TOLERANCE_M
+            assert pair["closest_approach_m"] >= offset - RESOLVED_TOLERANCE_M
+            assert pair["resolved"] and pair["acted"]
     assert report["conflicts_resolved"] == report["conflicts"]
-    if not climbers:
-        assert report["conflicts"] == 0
-    if name == "three_drones":
-        assert report["conflicts"] == 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "climbers", "conflicts"),
+    [
+        ("crossing", {1: 1}, 1),
+        ("corridor", {1: 1}, 1),
+        ("no_conflict", {}, 0),
+        ("three_drones", {1: 1}, 2),
+        ("ardupilot", {1: 1}, 1),
+        ("lossy_sf9", {1: 1}, 1),
+    ],
+)
+def test_scenario(name: str, climbers: dict[int, int], conflicts: int) -> None:
+    report = _replay(name)
+    check(report, climbers)
+    assert report["conflicts"] == conflicts
     if name == "lossy_sf9":
         assert report["link"]["profile"] == "eu868-sf9" and report["link"]["loss"] == 0.3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "climbers", "conflicts"),
+    [
+        ("inflight_crossing", {1: 1}, 1),
+        ("inflight_headon", {1: 1}, 1),
+        ("inflight_eu868", {1: 1}, 1),
+        ("inflight_star", None, 3),
+    ],
+)
+def test_in_flight_scenario(name: str, climbers: dict[int, int] | None, conflicts: int) -> None:
+    """Both (all) drones airborne from the start; the result must arrive in time."""
+    report = _replay(name)
+    if climbers is None:  # three drones: who is Alice to whom depends on take-off timing
+        levels = sorted(max(d["levels"].values(), default=0) for d in report["drones"])
+        assert levels == [0, 1, 2]  # three heights, one offset apart
+        climbers = {d["id"]: max(d["levels"].values()) for d in report["drones"] if d["levels"]}
+    check(report, climbers, every_conflict=False)
+    assert report["conflicts"] == conflicts
+    for drone in report["drones"]:
+        kinds = [e["kind"] for e in drone["timeline"]]
+        if drone["id"] in climbers:  # when the run started, the result came, the edit landed
+            assert {"run_started", "result", "uploaded"} <= set(kinds)
 
 
 def test_bad_scenarios_are_refused(tmp_path: Path) -> None:
@@ -120,7 +156,7 @@ def test_fault_rejected_upload_keeps_the_old_mission() -> None:
 
 @pytest.mark.slow
 def test_fault_peer_vanishes_mid_run() -> None:
-    scenario = _drone(_crossing(), 2, companion_stop_s=150.0)
+    scenario = _drone(_crossing(), 2, companion_stop_s=20.0)  # while they compare
     report = asyncio.run(run_replay(scenario)).report
     alice = report["drones"][0]
     assert any(f["kind"] == "run_failed" for f in alice["failures"])
@@ -130,14 +166,54 @@ def test_fault_peer_vanishes_mid_run() -> None:
 
 @pytest.mark.slow
 def test_fault_link_at_30_percent_loss() -> None:
-    """At 30 % loss the comparison takes about twice as long: drone 1 waits longer on the
-    ground and drone 2 holds longer over the mast."""
-    scenario = _crossing(loss=0.3, seed=9, time_scale=100.0, time_limit_s=2600.0)
+    """At 30 % loss the comparison takes longer: drone 1 waits longer on the ground and
+    drone 2 holds longer over the mast."""
+    scenario = _crossing(loss=0.3, seed=9, time_scale=60.0, time_limit_s=1200.0)
     inspection = scenario.drones[1]
-    longer = [it.replace(param1=1800.0) if it.command == 19 else it for it in inspection.mission]
-    scenario = _drone(_drone(scenario, 2, mission=longer), 1, takeoff_delay_s=1300.0)
+    longer = [it.replace(param1=700.0) if it.command == 19 else it for it in inspection.mission]
+    scenario = _drone(_drone(scenario, 2, mission=longer), 1, takeoff_delay_s=400.0)
     report = asyncio.run(run_replay(scenario)).report
     alice = report["drones"][0]
     assert alice["flagged_segments"] == alice["conflicting_segments"] == [0]
     assert alice["vehicle_holds"] == "edited"
     assert report["conflicts_resolved"] == report["conflicts"] == 1
+
+
+def _in_flight(name: str, **changes: object) -> Scenario:
+    scenario = load_scenario(SCENARIOS / f"{name}.toml")
+    return dataclasses.replace(scenario, **changes)  # type: ignore[arg-type]
+
+
+@pytest.mark.slow
+def test_failsafe_climbs_when_the_result_cannot_arrive_in_time() -> None:
+    """EU868 SF12 under the 1 % duty cycle: a first run takes hours of regulated airtime.
+    Drone 1 sees it cannot know in time and climbs over what drone 2 can reach."""
+    scenario = _in_flight("inflight_crossing", link_profile="eu868-sf12", time_limit_s=200.0)
+    report = asyncio.run(run_replay(scenario)).report
+    alice = report["drones"][0]
+    assert report["precautionary_actions"] >= 1
+    action = alice["precautionary"][0]
+    assert action["action"] == "climb" and action["needed_s"] > action["time_to_meet_s"]
+    assert 1 in action["segments"]  # the leg over the crossing
+    (pair,) = report["pairs"]
+    assert pair["conflict"] and pair["acted"] and pair["resolved"]
+    assert pair["closest_approach_m"] >= report["offset_m"] - RESOLVED_TOLERANCE_M
+    assert not alice["runs"]  # no result: the precaution alone kept them apart
+
+
+@pytest.mark.slow
+def test_failsafe_hold_stops_before_the_segments_within_reach() -> None:
+    scenario = _in_flight(
+        "inflight_crossing",
+        link_profile="eu868-sf12",
+        time_limit_s=200.0,
+        failsafe=Action.HOLD,
+    )
+    replay = asyncio.run(run_replay(scenario))
+    report = replay.report
+    alice = report["drones"][0]
+    assert alice["precautionary"][0]["action"] == "hold"
+    assert any(e["kind"] == "hold" for e in alice["timeline"])
+    (pair,) = report["pairs"]
+    assert pair["acted"] and pair["closest_approach_m"] > 50  # drone 1 waited short of it
+    assert not report["finished"]  # it holds until a result arrives

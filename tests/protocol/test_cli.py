@@ -30,7 +30,7 @@ def test_compare_json(tmp_path: Path) -> None:
     assert first["hits"] == first["plain_hits"] == [True]
     assert second["hits"] == second["plain_hits"] == [True, True]
     for case in out["cases"]:
-        assert case["messages"] == 8 and case["round_trips"] == 4
+        assert 8 <= case["messages"] <= 16 and case["messages"] % 2 == 0  # Bob sends the last
         assert case["bytes_alice_to_bob"] > 0 and case["cpu_s_bob"] > 0
 
 

@@ -1,7 +1,11 @@
+"""Veugen's comparison (paper suite): correct on every boundary, fixed sizes, strict machines."""
+
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
-from hypothesis import given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from protocol.comparison import (
@@ -10,102 +14,91 @@ from protocol.comparison import (
     ComparisonAlice,
     ComparisonBob,
     MaskedDifferences,
-    State,
-    packed_count,
+    pack_differences,
     slots_per_ciphertext,
 )
 from protocol.errors import InsecureParametersError, LocalProtocolError, RemoteProtocolError
 from protocol.loopback import run_comparison
 
-BACKENDS = ["ec", "dgk"]
 
-
-def compare(keys, backend, pairs, l, kappa=40):
-    """Run one batched comparison through the wire; return (a XOR b list, transcript)."""
-    bob_bits, alice_bits = keys.backend(backend)
+def parties(
+    keys: Any, values: list[int], l: int, thresholds: list[list[int]] | None = None, kappa: int = 40
+) -> tuple[ComparisonAlice, ComparisonBob]:
     pub = keys.paillier_pub
-    diffs = [pub.encrypt(x) - pub.encrypt(y) for x, y in pairs]
-    alice = ComparisonAlice(pub, alice_bits, l, kappa, diffs)
-    bob = ComparisonBob(keys.paillier, bob_bits, l, kappa, len(pairs))
-    transcript = run_comparison(alice, bob, keys.paillier.public_key)
-    return [a ^ b for a, b in zip(alice.shares, bob.shares, strict=True)], transcript
-
-
-def boundary_pairs(l):
-    lo, hi = -(2 ** (l - 1)), 2 ** (l - 1) - 1
-    pairs = [(0, 0), (lo, lo), (hi, hi), (lo, hi), (hi, lo), (0, lo), (lo, 0), (0, hi), (hi, 0)]
-    for y in (lo + 1, -1, 0, 1, hi - 1):
-        pairs += [(y, y), (y + 1, y), (y - 1, y), (y, y + 1), (y, y - 1)]
-    return [(x, y) for x, y in pairs if lo <= x <= hi and lo <= y <= hi]
-
-
-@pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("l", [1, 2, 20, 42])
-def test_every_boundary(keys, backend, l):
-    pairs = boundary_pairs(l)
-    result, _ = compare(keys, backend, pairs, l)
-    assert result == [int(x >= y) for x, y in pairs]
-
-
-@pytest.mark.parametrize("backend", BACKENDS)
-@settings(max_examples=8, deadline=None)
-@given(data=st.data())
-def test_random_values(keys, backend, data):
-    l = data.draw(st.sampled_from([8, 20, 42, 64]))
-    value = st.integers(min_value=-(2 ** (l - 1)), max_value=2 ** (l - 1) - 1)
-    pairs = data.draw(st.lists(st.tuples(value, value), min_size=1, max_size=30))
-    result, _ = compare(keys, backend, pairs, l)
-    assert result == [int(x >= y) for x, y in pairs]
-
-
-def test_batch_spans_several_packed_ciphertexts(keys):
-    l = 20
-    per = slots_per_ciphertext(keys.paillier_pub, l, 40)
-    count = 2 * per + 3
-    pairs = [(i % 7 - 3, (i * 5) % 9 - 4) for i in range(count)]
-    result, transcript = compare(keys, "ec", pairs, l)
-    assert result == [int(x >= y) for x, y in pairs]
-    assert transcript.sizes[0] == ("masked", 3 * 512)
-    assert packed_count(keys.paillier_pub, l, 40, count) == 3
-
-
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_wire_sizes_are_fixed(keys, backend):
-    l = 42
-    _, t1 = compare(keys, backend, [(5, 4)], l)
-    _, t2 = compare(keys, backend, [(-(2**41), 2**41 - 1)], l)
-    assert t1.sizes == t2.sizes
-    bits = 16 + 33 * l if backend == "ec" else 256 * l
-    tests = 66 * (l + 1) if backend == "ec" else 256 * (l + 1)
-    assert t1.sizes == [("masked", 512), ("bits", bits), ("tests", tests)]
-    assert t1.messages == 3
-
-
-def test_shares_are_not_the_result(keys):
-    """Neither party's share alone equals the result on every run (they are masked)."""
-    seen_alice, seen_bob = set(), set()
-    for _ in range(12):
-        bob_bits, alice_bits = keys.backend("ec")
-        pub = keys.paillier_pub
-        alice = ComparisonAlice(pub, alice_bits, 8, 40, [pub.encrypt(3) - pub.encrypt(1)])
-        bob = ComparisonBob(keys.paillier, bob_bits, 8, 40, 1)
-        run_comparison(alice, bob, keys.paillier.public_key)
-        seen_alice.add(alice.shares[0])
-        seen_bob.add(bob.shares[0])
-        assert alice.shares[0] ^ bob.shares[0] == 1
-    assert seen_alice == {0, 1} and seen_bob == {0, 1}
-
-
-def _parties(keys, count=2, l=8):
-    bob_bits, alice_bits = keys.backend("ec")
-    pub = keys.paillier_pub
-    alice = ComparisonAlice(pub, alice_bits, l, 40, [pub.encrypt(i) for i in range(count)])
-    bob = ComparisonBob(keys.paillier, bob_bits, l, 40, count)
+    thresholds = thresholds or [[0] for _ in values]
+    packed = pack_differences(pub, [pub.encrypt(v) for v in values], l, kappa)
+    alice = ComparisonAlice(pub, keys.dgk_pub, l, kappa, packed, thresholds)
+    slots = [len(p.constants) for p in packed]
+    bob = ComparisonBob(keys.paillier, keys.dgk, l, kappa, slots, [len(t) for t in thresholds])
     return alice, bob
 
 
-def test_steps_out_of_order_are_local_errors(keys):
-    alice, bob = _parties(keys)
+def compare(keys: Any, values: list[int], l: int, thresholds: list[list[int]] | None = None) -> Any:
+    alice, bob = parties(keys, values, l, thresholds)
+    transcript = run_comparison(alice, bob)
+    result = [
+        [a ^ b for a, b in zip(pa, pb, strict=True)]
+        for pa, pb in zip(alice.shares, bob.shares, strict=True)
+    ]
+    return result, transcript
+
+
+def boundary_values(l: int) -> list[int]:
+    lo, hi = -(2 ** (l - 1)), 2 ** (l - 1) - 1
+    return sorted({v for v in (lo, lo + 1, -2, -1, 0, 1, 2, hi - 1, hi) if lo <= v <= hi})
+
+
+@pytest.mark.parametrize("l", [1, 2, 20, 42])
+def test_every_boundary(keys: Any, l: int) -> None:
+    values = boundary_values(l)
+    result, _ = compare(keys, values, l)
+    assert result == [[int(v >= 0)] for v in values]
+
+
+@settings(
+    max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(data=st.data())
+def test_random_values_and_thresholds(keys: Any, data: st.DataObject) -> None:
+    l = data.draw(st.sampled_from([8, 20, 42]))
+    half = 2 ** (l - 2)
+    values = data.draw(st.lists(st.integers(-half, half), min_size=1, max_size=12))
+    thresholds = [
+        data.draw(st.lists(st.integers(-half + 1, half), min_size=1, max_size=2)) for _ in values
+    ]
+    result, _ = compare(keys, values, l, thresholds)
+    assert result == [[int(v >= t) for t in ts] for v, ts in zip(values, thresholds, strict=True)]
+
+
+def test_batch_spans_several_packed_ciphertexts(keys: Any) -> None:
+    l = 20
+    per = slots_per_ciphertext(keys.paillier_pub, l, 40)
+    values = [(i % 7) - 3 for i in range(2 * per + 3)]
+    result, transcript = compare(keys, values, l)
+    assert result == [[int(v >= 0)] for v in values]
+    assert transcript.sizes[0] == ("masked", 3 * 512)
+
+
+def test_wire_sizes_are_fixed(keys: Any) -> None:
+    l = 42
+    _, t1 = compare(keys, [5], l)
+    _, t2 = compare(keys, [-(2**41)], l)
+    assert t1.sizes == t2.sizes == [("masked", 512), ("bits", 256 * l), ("tests", 256 * (l + 1))]
+
+
+def test_shares_are_not_the_result(keys: Any) -> None:
+    seen_alice, seen_bob = set(), set()
+    for _ in range(12):
+        alice, bob = parties(keys, [2], 8)
+        run_comparison(alice, bob)
+        seen_alice.add(alice.shares[0][0])
+        seen_bob.add(bob.shares[0][0])
+        assert alice.shares[0][0] ^ bob.shares[0][0] == 1
+    assert seen_alice == {0, 1} and seen_bob == {0, 1}
+
+
+def test_steps_out_of_order_are_local_errors(keys: Any) -> None:
+    alice, bob = parties(keys, [0, 1], 8)
     with pytest.raises(LocalProtocolError):
         _ = alice.shares
     with pytest.raises(LocalProtocolError):
@@ -120,49 +113,34 @@ def test_steps_out_of_order_are_local_errors(keys):
         bob.decompose(masked)
 
 
-def test_malformed_messages_fail_the_state_machine(keys):
-    alice, bob = _parties(keys)
-    alice.mask()
-    with pytest.raises(RemoteProtocolError):
-        alice.compare_bits(BitDecompositions(b"\x00" * alice.bits_size()))
-    assert alice.state is State.FAILED
-    with pytest.raises(LocalProtocolError):
-        alice.compare_bits(BitDecompositions(b""))
-
-    alice, bob = _parties(keys)
+def test_malformed_messages_are_rejected(keys: Any) -> None:
+    alice, bob = parties(keys, [0, 1], 8)
     masked = alice.mask()
     with pytest.raises(RemoteProtocolError):
-        bob.decompose(MaskedDifferences(masked.ciphertexts * 2))
-    assert bob.state is State.FAILED
-
-
-def test_out_of_range_packing_is_rejected(keys):
-    _, bob = _parties(keys, count=1)
-    bogus = keys.paillier_pub.encrypt(1 << 200)
+        alice.compare_bits(BitDecompositions(b"\x00" * alice.bits_size()))
     with pytest.raises(RemoteProtocolError):
-        bob.decompose(MaskedDifferences((bogus,)))
-    assert bob.state is State.FAILED
+        bob.decompose(MaskedDifferences(masked.ciphertexts * 2))
+    _, bob = parties(keys, [0], 8)
+    with pytest.raises(RemoteProtocolError):
+        bob.decompose(MaskedDifferences((keys.paillier_pub.encrypt(1 << 200),)))
 
 
-def test_wrong_test_count_and_double_zero_are_rejected(keys):
-    alice, bob = _parties(keys, count=1)
-    bits = bob.decompose(alice.mask())
-    tests = alice.compare_bits(bits)
+def test_wrong_test_count_and_double_zero_are_rejected(keys: Any) -> None:
+    alice, bob = parties(keys, [1], 8)
+    tests = alice.compare_bits(bob.decompose(alice.mask()))
     with pytest.raises(RemoteProtocolError):
         bob.zero_test(BlindedTests(tests.ciphertexts[:-1]))
-
-    alice, bob = _parties(keys, count=1)
+    alice, bob = parties(keys, [1], 8)
     bob.decompose(alice.mask())
-    zero = keys.ec_pub.encrypt(0)
+    zero = keys.dgk_pub.encrypt(0)
     with pytest.raises(RemoteProtocolError):
-        bob.zero_test(BlindedTests((zero,) * (bob.l + 1)))
+        bob.zero_test(BlindedTests((zero,) * 9))
 
 
-def test_parameter_floor(keys):
-    bob_bits, alice_bits = keys.backend("ec")
+def test_parameter_floor(keys: Any) -> None:
     with pytest.raises(InsecureParametersError):
-        ComparisonAlice(keys.paillier_pub, alice_bits, 8, 20, [keys.paillier_pub.encrypt(1)])
+        parties(keys, [1], 8, kappa=20)
     with pytest.raises(LocalProtocolError):
-        ComparisonBob(keys.paillier, bob_bits, 0, 40, 1)
-    with pytest.raises(LocalProtocolError):  # DGK's u = 197 carries l <= 64 only
-        ComparisonBob(keys.paillier, keys.dgk, 65, 40, 1)
+        ComparisonBob(keys.paillier, keys.dgk, 0, 40, [1], [1])
+    with pytest.raises(LocalProtocolError):  # DGK's u = 263 carries l <= 86 only
+        ComparisonBob(keys.paillier, keys.dgk, 87, 40, [1], [1])

@@ -10,6 +10,7 @@ from shapely.geometry import Point as ShapelyPoint
 
 from protocol.geometry import (
     circuit,
+    clip_to_box,
     orient,
     orient_coefficients,
     path_hits,
@@ -76,3 +77,33 @@ def test_path_hits_on_the_paper_routes() -> None:
     bob = ((5, -5), (5, 5), (20, 5))
     assert path_hits(alice, bob) == [True, True]
     assert path_hits(alice, ((50, 50), (60, 60))) == [False, False]
+
+
+# --------------------------------------------------------------------------- the public box
+
+
+@given(
+    path=st.lists(st.tuples(st.integers(-400, 400), st.integers(-400, 400)), min_size=2, max_size=6)
+)
+def test_clip_stays_in_the_box_and_keeps_inside_paths(path: list[tuple[int, int]]) -> None:
+    r = 100
+    clipped = clip_to_box(path, r)
+    assert len(clipped) >= 2 and all(abs(x) <= r and abs(y) <= r for x, y in clipped)
+    if all(abs(x) <= r and abs(y) <= r for x, y in path):
+        assert clipped == tuple(path)
+
+
+@given(
+    alice=st.lists(st.tuples(st.integers(-90, 90), st.integers(-90, 90)), min_size=2, max_size=4),
+    bob=st.lists(st.integers(-400, 400), min_size=3, max_size=7),
+)
+def test_clip_is_exact_where_the_cut_falls_on_the_grid(
+    alice: list[tuple[int, int]], bob: list[int]
+) -> None:
+    """An axis-parallel path (cut points are grid points) meets Alice's path inside the box
+    exactly as before cutting: the walk along the edge never reaches her."""
+    path = [(bob[0], bob[1])]
+    for k, value in enumerate(bob[2:]):
+        x, y = path[-1]
+        path.append((value, y) if k % 2 == 0 else (x, value))
+    assert path_hits(alice, clip_to_box(path, 100)) == path_hits(alice, path)

@@ -1,4 +1,4 @@
-"""The encrypted path protocol agrees with the plaintext predicate, and its machines are strict."""
+"""The path protocol agrees with the plaintext predicate (shapely-checked), on both suites."""
 
 from __future__ import annotations
 
@@ -15,40 +15,27 @@ from protocol.geometry import Point, path_hits
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob, Limits, State, pad_path
 from protocol.loopback import run_paths
-from protocol.wire import Hello, Suite
+from protocol.wire import Suite
 
 from .adversarial import ADVERSARIAL, R
+from .paths import GRID, machines, run
 
-GRID = GridSpec(GridKind.PLANE, R)
 DATA = Path(__file__).resolve().parents[3] / "shared" / "anchor-data"
 
 
-def run(
-    alice_path: tuple[Point, ...],
-    bob_path: tuple[Point, ...],
-    keys: Any,
-    suite: Suite = Suite.COMPACT,
-    grid: GridSpec = GRID,
-) -> tuple[list[bool], Any]:
-    alice = Alice(alice_path, grid, {suite: keys.alice[suite]})
-    bob = Bob(bob_path, keys.bob)
-    transcript = run_paths(alice, bob)
-    assert alice.state is State.DONE and bob.state is State.DONE
-    return alice.hits, transcript
-
-
 @pytest.mark.parametrize(("name", "pair"), ADVERSARIAL, ids=[n for n, _ in ADVERSARIAL])
-def test_adversarial_pairs_compact(name: str, pair: Any, path_keys: Any) -> None:
+def test_adversarial_pairs_compact(name: str, pair: Any, ot_pair: Any) -> None:
     a, b, c, d = pair
-    hits, transcript = run((a, b), (c, d), path_keys)
+    hits, _transcript = run(
+        (a, b), (c, d), Suite.COMPACT, None, ot_pair, GridSpec(GridKind.PLANE, R)
+    )
     assert hits == path_hits((a, b), (c, d))
-    assert transcript.messages == 8 and transcript.round_trips == 4
 
 
 @pytest.mark.parametrize("index", [0, 2, 14, 16, 20, 29])
-def test_adversarial_pairs_paper_suite(index: int, path_keys: Any) -> None:
+def test_adversarial_pairs_paper_suite(index: int, keys: Any) -> None:
     a, b, c, d = ADVERSARIAL[index][1]
-    hits, _ = run((a, b), (c, d), path_keys, Suite.PAPER)
+    hits, _ = run((a, b), (c, d), Suite.PAPER, keys, None)
     assert hits == path_hits((a, b), (c, d))
 
 
@@ -57,21 +44,44 @@ def small_paths(max_segments: int) -> st.SearchStrategy[tuple[Point, ...]]:
     return st.lists(point, min_size=2, max_size=max_segments + 1).map(tuple)
 
 
-@pytest.mark.slow
 @settings(
-    max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
-@given(alice_path=small_paths(4), bob_path=small_paths(3))
-def test_random_degenerate_paths(alice_path: Any, bob_path: Any, path_keys: Any) -> None:
+@given(alice_path=small_paths(4), bob_path=small_paths(4))
+def test_random_degenerate_paths_compact(alice_path: Any, bob_path: Any, ot_pair: Any) -> None:
     """Paths on a 7 x 7 grid: shared vertices, overlaps and zero-length segments abound."""
-    hits, _ = run(alice_path, bob_path, path_keys, grid=GridSpec(GridKind.PLANE, 3))
+    hits, _ = run(alice_path, bob_path, Suite.COMPACT, None, ot_pair, GridSpec(GridKind.PLANE, 3))
     assert hits == path_hits(alice_path, bob_path)
 
 
-def test_paper_suite_multi_segment(path_keys: Any) -> None:
-    alice_path = ((0, 0), (10, 0), (10, 10))
-    bob_path = ((5, -5), (5, 5), (20, 5), (20, 20))
-    hits, _ = run(alice_path, bob_path, path_keys, Suite.PAPER)
+@pytest.mark.slow
+@settings(
+    max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(alice_path=small_paths(2), bob_path=small_paths(2))
+def test_random_degenerate_paths_paper(alice_path: Any, bob_path: Any, keys: Any) -> None:
+    hits, _ = run(alice_path, bob_path, Suite.PAPER, keys, None, GridSpec(GridKind.PLANE, 3))
+    assert hits == path_hits(alice_path, bob_path)
+
+
+@settings(
+    max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(data=st.data())
+def test_random_wide_paths_compact(data: st.DataObject, ot_pair: Any) -> None:
+    """Longer paths over a large range (l = 34): the full comparison width is exercised."""
+    r = data.draw(st.sampled_from([1, 2000, 30000]))
+    point = st.tuples(st.integers(-r, r), st.integers(-r, r))
+    alice_path = tuple(data.draw(st.lists(point, min_size=2, max_size=7)))
+    bob_path = tuple(data.draw(st.lists(point, min_size=2, max_size=7)))
+    hits, _ = run(alice_path, bob_path, Suite.COMPACT, None, ot_pair, GridSpec(GridKind.PLANE, r))
+    assert hits == path_hits(alice_path, bob_path)
+
+
+def test_paper_suite_multi_segment(keys: Any) -> None:
+    hits, _ = run(
+        ((0, 0), (10, 0), (10, 10)), ((5, -5), (5, 5), (20, 5), (20, 20)), Suite.PAPER, keys, None
+    )
     assert hits == [True, True]
 
 
@@ -82,45 +92,63 @@ def _read(name: str) -> list[tuple[Point, ...]]:
     ]
 
 
-@pytest.mark.slow
-def test_paper_benchmark_pairs(path_keys: Any) -> None:
+needs_data = pytest.mark.skipif(not DATA.exists(), reason="the paper's data is in ../shared")
+
+
+@needs_data
+def test_paper_benchmark_pairs(ot_pair: Any) -> None:
     """The 30 pairs of the paper's benchmark against the answers in anchor-data/README.md."""
     expected = "110111000101101010000100000110"
     alice, bob = _read("alices_segments.txt"), _read("bobs_segments.txt")
     got = "".join(
-        "1" if run(a, b, path_keys)[0][0] else "0" for a, b in zip(alice, bob, strict=True)
+        "1" if run(a, b, Suite.COMPACT, None, ot_pair)[0][0] else "0"
+        for a, b in zip(alice, bob, strict=True)
     )
     assert got == expected
 
 
-@pytest.mark.slow
+@needs_data
 @pytest.mark.parametrize(
     ("route", "indices"), [(1, [0, 3]), (2, [0, 2]), (3, [0, 1, 2]), (4, []), (5, [1, 2, 3])]
 )
-def test_paper_routes(route: int, indices: list[int], path_keys: Any) -> None:
+def test_paper_routes(route: int, indices: list[int], ot_pair: Any) -> None:
     alice, bob = _read(f"ownroute{route}.txt")[0], _read(f"cryptroute{route}.txt")[0]
-    grid = GridSpec(GridKind.PLANE, 1500)
-    hits, _ = run(alice, bob, path_keys, grid=grid)
+    hits, _ = run(alice, bob, Suite.COMPACT, None, ot_pair, GridSpec(GridKind.PLANE, 1500))
     assert [i for i, h in enumerate(hits) if h] == indices
 
 
-def test_geographic_paths(path_keys: Any) -> None:
+def test_geographic_paths(ot_pair: Any) -> None:
     """Bob's waypoints in degE7, projected on Alice's grid after her hello."""
     lat, lon = 473_977_420, 85_455_940  # Zurich
     grid = GridSpec.geo(lat, lon, radius_m=2000)
     bob_geo = ((lat - 9_000, lon), (lat + 9_000, lon))  # ~200 m north-south line
     alice_geo = ((lat, lon - 13_000), (lat, lon + 13_000), (lat + 20_000, lon + 13_000))
-    alice_path = grid.project_path(alice_geo)
-    alice = Alice(alice_path, grid, {Suite.COMPACT: path_keys.alice[Suite.COMPACT]})
-    bob = Bob(bob_geo, path_keys.bob, geographic=True)
+    alice, bob = machines(
+        grid.project_path(alice_geo), bob_geo, Suite.COMPACT, None, ot_pair, grid, geographic=True
+    )
     run_paths(alice, bob)
     assert alice.hits == [True, False]
 
 
-def test_message_sizes_depend_only_on_public_values(path_keys: Any) -> None:
-    _, crossing = run(((0, 0), (10, 10), (20, 0)), ((0, 10), (10, 0)), path_keys)
-    _, apart = run(((50, 50), (51, 50), (52, 50)), ((-50, -50), (-60, -60)), path_keys)
-    assert crossing.sizes == apart.sizes
+def test_bob_path_beyond_the_box_is_cut_not_refused(ot_pair: Any) -> None:
+    """A grid that always fits: Bob's path far outside Alice's box is cut at its edge."""
+    grid = GridSpec(GridKind.PLANE, 20)
+    alice_path = ((-10, 0), (10, 0), (10, 10))
+    bob_path = ((0, -5000), (0, 5000), (9000, 9000))  # crosses segment 0, leaves the box
+    hits, _ = run(alice_path, bob_path, Suite.COMPACT, None, ot_pair, grid)
+    assert hits == [True, False]
+    far = ((5000, 5000), (6000, 5000))  # entirely outside: nothing to meet
+    hits, _ = run(alice_path, far, Suite.COMPACT, None, ot_pair, grid)
+    assert hits == [False, False]
+
+
+def test_message_sizes_depend_only_on_public_values(ot_pair: Any, keys: Any) -> None:
+    for suite in (Suite.COMPACT, Suite.PAPER):
+        _, crossing = run(((0, 0), (10, 10), (20, 0)), ((0, 10), (10, 0)), suite, keys, ot_pair)
+        _, apart = run(
+            ((50, 50), (51, 50), (52, 50)), ((-50, -50), (-60, -60)), suite, keys, ot_pair
+        )
+        assert crossing.sizes == apart.sizes
 
 
 def test_padding_changes_no_answer() -> None:
@@ -141,76 +169,86 @@ def test_limits() -> None:
         Limits(max_segments=4).padded(5)
 
 
+def test_cached_setup_is_reused_and_unknown_setups_are_refused(ot_pair: Any) -> None:
+    fresh = Alice(((0, 0), (1, 1)), GRID)
+    bob_setups: dict[bytes, Any] = {}
+    run_paths(fresh, Bob(((0, 1), (1, 0)), setups=bob_setups))
+    assert fresh.setup is not None and list(bob_setups) == [fresh.setup.setup_id]
+    again = Alice(((0, 0), (1, 1)), GRID, setup=fresh.setup)
+    assert len(again.start()) < 200  # the setup id instead of 128 points
+    stranger = Alice(((0, 0), (1, 1)), GRID, setup=ot_pair.holder)
+    bob = Bob(((0, 1), (1, 0)), setups=bob_setups)
+    with pytest.raises(RemoteProtocolError, match="unknown OT setup"):
+        bob.receive(stranger.start())
+    assert bob.state is State.FAILED
+
+
 # --------------------------------------------------------------------------- state machines
 
 
-def test_out_of_order_and_failed_states(path_keys: Any) -> None:
-    alice = Alice(((0, 0), (1, 1)), GRID, {Suite.COMPACT: path_keys.alice[Suite.COMPACT]})
+def test_out_of_order_and_failed_states(ot_pair: Any) -> None:
+    alice = Alice(((0, 0), (1, 1)), GRID, setup=ot_pair.holder)
     with pytest.raises(LocalProtocolError):
         _ = alice.hits
     hello = alice.start()
     with pytest.raises(LocalProtocolError):
         alice.start()
     with pytest.raises(RemoteProtocolError):
-        alice.receive(hello)  # a HELLO where KEYS is expected
+        alice.receive(hello)  # a HELLO where the OFFER is expected
     assert alice.state is State.FAILED
     with pytest.raises(LocalProtocolError):
         alice.receive(hello)
 
 
-def test_bob_refuses_weak_kappa_and_oversized_paths(path_keys: Any) -> None:
-    key = path_keys.alice[Suite.COMPACT]
-    weak = Alice(((0, 0), (1, 1)), GRID, {Suite.COMPACT: key}, kappa=20, insecure_for_tests=True)
+def test_bob_refuses_weak_kappa_and_oversized_paths(keys: Any, ot_pair: Any) -> None:
+    weak = Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER, kappa=20, insecure_for_tests=True)
     with pytest.raises(RemoteProtocolError, match="kappa"):
-        Bob(((0, 1), (1, 0)), path_keys.bob).receive(weak.start())
+        Bob(((0, 1), (1, 0)), keys=keys.bob).receive(weak.start())
     long_path = tuple((i % 5, i % 7) for i in range(9))  # 8 segments
-    alice = Alice(long_path, GRID, {Suite.COMPACT: key})
-    bob = Bob(((0, 1), (1, 0)), path_keys.bob, limits=Limits(max_segments=4))
+    alice = Alice(long_path, GRID, setup=ot_pair.holder)
+    bob = Bob(((0, 1), (1, 0)), setups=ot_pair.setups, limits=Limits(max_segments=4))
     with pytest.raises(RemoteProtocolError, match="segments"):
         bob.receive(alice.start())
     assert bob.state is State.FAILED
 
 
-def test_suite_negotiation(path_keys: Any) -> None:
-    from protocol.intersection import BobKeys
-
-    alice = Alice(((0, 0), (1, 1)), GRID, {Suite.PAPER: path_keys.alice[Suite.PAPER]})
-    compact_only = BobKeys(
-        path_keys.bob.paillier, {Suite.COMPACT: path_keys.bob.bits[Suite.COMPACT]}
-    )
+def test_suite_choice(keys: Any) -> None:
+    alice = Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER)
     with pytest.raises(RemoteProtocolError, match="suite"):
-        Bob(((0, 1), (1, 0)), compact_only).receive(alice.start())
-    hello = Hello.from_bytes(Alice(((0, 0), (1, 1)), GRID, dict(path_keys.alice)).start())
-    assert hello.suites == (Suite.COMPACT, Suite.PAPER)
-
-
-def test_bob_path_outside_alices_grid(path_keys: Any) -> None:
-    alice = Alice(
-        ((0, 0), (1, 1)),
-        GridSpec(GridKind.PLANE, 10),
-        {Suite.COMPACT: path_keys.alice[Suite.COMPACT]},
-    )
-    with pytest.raises(RemoteProtocolError, match="grid"):
-        Bob(((0, 0), (50, 50)), path_keys.bob).receive(alice.start())
+        Bob(((0, 1), (1, 0)), suites=(Suite.COMPACT,)).receive(alice.start())
+    with pytest.raises(LocalProtocolError, match="keys"):
+        Bob(((0, 1), (1, 0))).receive(Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER).start())
     with pytest.raises(InputRangeError):
-        Alice(((0, 0), (11, 0)), GridSpec(GridKind.PLANE, 10), dict(path_keys.alice))
+        Alice(((0, 0), (11, 0)), GridSpec(GridKind.PLANE, 10))
 
 
-def test_oversized_peer_keys_are_refused(path_keys: Any) -> None:
-    from protocol.intersection import read_bits_key
+def test_oversized_peer_keys_are_refused(keys: Any) -> None:
+    from protocol.suite_paper import read_dgk_key
+    from protocol.wire import MsgType, frame, put_blob
 
     with pytest.raises(RemoteProtocolError, match="4096"):
-        read_bits_key(Suite.PAPER, bytes([1]) * (3 * 1024 + 4))
-    alice = Alice(((0, 0), (1, 1)), GRID, {Suite.COMPACT: path_keys.alice[Suite.COMPACT]})
+        read_dgk_key(bytes([1]) * (3 * 1024 + 5), False)
+    alice = Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER)
     alice.start()
-    from protocol.wire import KeysHeader, MsgType, frame
-
     big_n = (1 << 8191) | 1  # odd, 8192 bits
-    head = KeysHeader(
-        Suite.COMPACT,
-        1,
-        big_n.to_bytes(1024, "big"),
-        path_keys.bob.bits[Suite.COMPACT].public_key.to_bytes(),
-    )
+    body = (1).to_bytes(2, "big") + put_blob(big_n.to_bytes(1024, "big")) + put_blob(b"")
     with pytest.raises(RemoteProtocolError):
-        alice.receive(frame(MsgType.KEYS, head.to_bytes()))
+        alice.receive(frame(MsgType.KEYS, 2, body))
+
+
+@pytest.mark.parametrize(
+    ("m", "n", "fresh"), [(1, 1, True), (2, 1, False), (4, 4, False), (3, 5, True)]
+)
+def test_message_sizes_are_known_before_the_run(m: int, n: int, fresh: bool, ot_pair: Any) -> None:
+    from protocol.suite_compact import message_sizes
+
+    grid = GridSpec(GridKind.PLANE, 2000)
+    alice_path = tuple((i * 7, (i * 13) % 50) for i in range(m + 1))
+    bob_path = tuple(((i * 11) % 40, i * 5) for i in range(n + 1))
+    alice = Alice(alice_path, grid, setup=None if fresh else ot_pair.holder)
+    bob = Bob(bob_path, setups={} if fresh else ot_pair.setups)
+    transcript = run_paths(alice, bob)
+    padded = Limits()
+    expected = message_sizes(padded.padded(m), padded.padded(n), grid, fresh_setup=fresh)
+    assert [size for _, size in expected] == [size for _, size in transcript.sizes]
+    assert [a for a, _ in expected] == [i % 2 == 0 for i in range(len(expected))]

@@ -1,10 +1,12 @@
-"""Bob's view of a path run is distributed the same whatever Alice's path (and answer).
+"""What each party sees of a compact run is distributed the same whatever the other's path.
 
-Bob's view, recomputed from the frames with his own keys: every masked value he decrypts
-(message 3), which comparison-test sets contain a zero (message 5), and the level-1 shares he
-zero-tests (message 7).  Two Alice segments, one crossing Bob's and one far away, must give
-views no two-sample test can tell apart; the negative control shows the same test does tell
-apart the sign bits the paper's code reveals.
+Bob's view, taken from his machine after honest runs: his shares of every compared value
+(products, modulo 2^(l+1)), his leaf shares (one table entry per digit), Alice's triple
+corrections and every opening Alice sends in the circuit rounds.  Alice's view: Bob's OT
+extension and choice corrections, his digit corrections and his circuit openings (her last
+message is her answer, which is allowed to differ).  Two runs whose answers differ must give
+views no two-sample test can tell apart; negative controls switch off one mask each and must
+be caught by the same tests, so the tests can fail.
 """
 
 from __future__ import annotations
@@ -14,113 +16,123 @@ from typing import Any
 
 import pytest
 
-from protocol.geometry import orient
+import protocol.millionaire as millionaire_module
+import protocol.products as products_module
+from protocol.bitpack import unpack_bits
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob
 from protocol.loopback import run_paths
-from protocol.wire import HEADER_SIZE, Suite
+from protocol.wire import HEADER_SIZE
 
 from .test_privacy import chi2_rejects, ks_rejects
 
-RUNS = 50
+RUNS = 60
 GRID = GridSpec(GridKind.PLANE, 99)
 BOB_PATH = ((0, 10), (10, 0))
 CROSSING = ((0, 0), (10, 10))
 FAR = ((50, 50), (60, 61))
+BOB_FAR = ((-50, -40), (-60, -20))
 
 
-def bob_view(alice_path: Any, keys: Any) -> tuple[list[float], list[list[int]]]:
-    values: list[float] = []
-    bits: list[list[int]] = []
-    for _ in range(RUNS):
-        frames: list[bytes] = []
-        alice = Alice(alice_path, GRID, {Suite.COMPACT: keys.alice[Suite.COMPACT]})
-        bob = Bob(BOB_PATH, keys.bob)
-        original = bob.receive
-
-        def spy(data: bytes, original: Any = original, frames: list[bytes] = frames) -> Any:
-            frames.append(data)
-            return original(data)
-
-        bob.receive = spy  # type: ignore[method-assign]
-        run_paths(alice, bob)
-        assert alice.hits == [alice_path is CROSSING]
-        paillier, ec = keys.bob.paillier, keys.bob.bits[Suite.COMPACT]
-        masked = frames[1][HEADER_SIZE:]
-        width = paillier.public_key.ciphertext_width
-        top = 1 << (bob.l + bob.kappa + 1)
-        for k in range(len(masked) // width):
-            ct = paillier.public_key.ciphertext_from_bytes(masked[k * width : (k + 1) * width])
-            packed = paillier.decrypt(ct)
-            slots = sum(p.length for p in bob.layout.ciphertexts[k])
-            values += [((packed >> (bob.w * s)) & ((1 << bob.w) - 1)) / top for s in range(slots)]
-        size, group = ec.public_key.token_size, bob.l + 1
-        tests = frames[2][HEADER_SIZE:]
-        run_bits = []
-        for start in range(0, len(tests), size * group):
-            chunk = tests[start : start + size * group]
-            run_bits.append(
-                int(any(ec.token_is_zero(chunk[j * size : (j + 1) * size]) for j in range(group)))
-            )
-        level1 = frames[3][HEADER_SIZE:]
-        run_bits += [int(not ec.token_is_zero(level1[j * size : (j + 1) * size])) for j in range(4)]
-        bits.append(run_bits)
-    return values, bits
-
-
-@pytest.mark.slow
-def test_bobs_view_does_not_depend_on_alices_path(path_keys: Any) -> None:
-    v1, bits1 = bob_view(CROSSING, path_keys)
-    v2, bits2 = bob_view(FAR, path_keys)
-    assert not ks_rejects(v1, v2)
-    for position in range(len(bits1[0])):
-        a = Counter(run[position] for run in bits1)
-        b = Counter(run[position] for run in bits2)
-        assert not chi2_rejects(a, b), f"bit {position} differs"
-    ones = sum(map(sum, bits1 + bits2))
-    total = sum(map(len, bits1 + bits2))
-    assert 0.4 < ones / total < 0.6  # shares are uniform bits
-    # Negative control: a sign bit the paper's code hands out, [orient(C, D, A) >= 0] for
-    # Alice's first vertex, differs -- and the same test sees it.
-    signs1 = Counter([int(orient(*BOB_PATH, CROSSING[0]) >= 0)] * RUNS)
-    signs2 = Counter([int(orient(*BOB_PATH, FAR[0]) >= 0)] * RUNS)
-    assert chi2_rejects(signs1, signs2)
-
-
-def test_alice_receives_only_ciphertexts_and_her_bits(path_keys: Any) -> None:
-    """Every byte Alice receives parses as keys, ciphertexts under Bob's keys, or the final
-    counts under her key, whose zero tests are exactly her answer."""
-    from protocol.encoding import Reader
-    from protocol.wire import KeysHeader, MsgType, unframe
-
-    frames: list[bytes] = []
-    own = path_keys.alice[Suite.COMPACT]
-    alice = Alice(((0, 0), (10, 10), (20, 0)), GRID, {Suite.COMPACT: own})
-    bob = Bob(BOB_PATH, path_keys.bob)
+def one_run(alice_path: Any, bob_path: Any, ot_pair: Any) -> tuple[Any, Any, list[bytes]]:
+    alice = Alice(alice_path, GRID, setup=ot_pair.holder)
+    bob = Bob(bob_path, setups=ot_pair.setups)
+    received: list[bytes] = []
     original = alice.receive
 
     def spy(data: bytes) -> Any:
-        frames.append(data)
+        received.append(data)
         return original(data)
 
     alice.receive = spy  # type: ignore[method-assign]
     run_paths(alice, bob)
-    keys_frame, bits_frame, gates_frame, counts_frame = frames
-    paillier = path_keys.bob.paillier.public_key
-    ec = path_keys.bob.bits[Suite.COMPACT].public_key
-    reader = Reader(unframe(keys_frame, MsgType.KEYS))
-    head = KeysHeader.read(reader)
-    assert head.paillier_key == paillier.to_bytes() and head.bits_key == ec.to_bytes()
-    while reader.remaining():
-        paillier.read_ciphertext(reader)  # validates membership in Z*_{n^2}
-    for data, kind in ((bits_frame, MsgType.BITS), (gates_frame, MsgType.GATES)):
-        body = unframe(data, kind)
-        reader = Reader(body)
-        ec.read_batch(reader, (len(body) - 16) // 33)  # a nonce and curve points, nothing else
-        reader.finish()
-    counts = unframe(counts_frame, MsgType.COUNTS)
-    size = own.public_key.token_size
-    zero = [
-        own.token_is_zero(counts[i * size : (i + 1) * size]) for i in range(len(counts) // size)
+    return alice, bob, received
+
+
+def bob_view(alice_path: Any, ot_pair: Any) -> tuple[list[float], list[list[int]]]:
+    values: list[float] = []
+    bits: list[list[int]] = []
+    for _ in range(RUNS):
+        alice, bob, _ = one_run(alice_path, BOB_PATH, ot_pair)
+        assert alice.hits == [alice_path is CROSSING]
+        impl: Any = bob._impl
+        l = impl.plan.l
+        values += [v / 2**l for v in impl.leaves.values]
+        gmw = impl.gmw
+        run_bits = [gmw.shares[w] for w in impl.plan.circuit.inputs]
+        for level in sorted(gmw._peer):
+            run_bits += gmw._peer[level]
+        bits.append(run_bits + impl._highs)
+    return values, bits
+
+
+def alice_view(bob_path: Any, ot_pair: Any, *, honest: bool = True) -> list[list[int]]:
+    views = []
+    for _ in range(RUNS):
+        alice, _, received = one_run(CROSSING, bob_path, ot_pair)
+        assert not honest or alice.hits == [bob_path is BOB_PATH]
+        offer = received[0][HEADER_SIZE + 18 :]  # after n and Bob's nonce
+        flips = offer[-alice._impl.plan.products.correction_size() :]  # type: ignore[attr-defined]
+        digits = received[1][HEADER_SIZE:]
+        run_bits = unpack_bits(offer[:40], 320)  # OT extension
+        for part in (flips, digits):  # choice corrections (whole bytes)
+            run_bits += unpack_bits(part[:-1], 8 * len(part) - 8)
+        gmw: Any = alice._impl.gmw  # type: ignore[attr-defined]
+        for level in sorted(gmw._peer):
+            run_bits += gmw._peer[level]
+        views.append(run_bits)
+    return views
+
+
+def indistinguishable(bits1: list[list[int]], bits2: list[list[int]]) -> list[int]:
+    """Positions whose bit distributions differ between the two sets of runs."""
+    return [
+        p
+        for p in range(len(bits1[0]))
+        if chi2_rejects(Counter(r[p] for r in bits1), Counter(r[p] for r in bits2))
     ]
-    assert [not z for z in zero][: len(alice.hits)] == alice.hits
+
+
+def pooled_ones(*sets: list[list[int]]) -> float:
+    bits = [b for runs in sets for run in runs for b in run]
+    return sum(bits) / len(bits)
+
+
+@pytest.mark.slow
+def test_bobs_view_does_not_depend_on_alices_path(ot_pair: Any) -> None:
+    v1, bits1 = bob_view(CROSSING, ot_pair)
+    v2, bits2 = bob_view(FAR, ot_pair)
+    assert not ks_rejects(v1, v2)
+    assert indistinguishable(bits1, bits2) == []
+    assert 0.45 < pooled_ones(bits1, bits2) < 0.55
+
+
+@pytest.mark.slow
+def test_alices_view_does_not_depend_on_bobs_path(ot_pair: Any) -> None:
+    bits1, bits2 = alice_view(BOB_PATH, ot_pair), alice_view(BOB_FAR, ot_pair)
+    assert indistinguishable(bits1, bits2) == []
+    assert 0.45 < pooled_ones(bits1, bits2) < 0.55
+
+
+@pytest.mark.slow
+def test_negative_control_unmasked_leaves_are_caught(ot_pair: Any, monkeypatch: Any) -> None:
+    """Without Alice's random leaf shares, Bob's table entries are the comparison bits."""
+    monkeypatch.setattr(millionaire_module.secrets, "randbits", lambda k: 0)
+    _, bits1 = bob_view(CROSSING, ot_pair)
+    _, bits2 = bob_view(FAR, ot_pair)
+    assert indistinguishable(bits1, bits2) != []
+
+
+@pytest.mark.slow
+def test_negative_control_unmasked_choices_are_caught(ot_pair: Any, monkeypatch: Any) -> None:
+    """Without Bob's random choice bits, his product corrections are his coordinates' bits."""
+    original = products_module.ProductsBob.corrections
+
+    def plain(self: Any) -> bytes:
+        self.rots = type(self.rots)(tuple(0 for _ in self.rots.choices), self.rots.keys)
+        return original(self)
+
+    monkeypatch.setattr(products_module.ProductsBob, "corrections", plain)
+    far = alice_view(BOB_FAR, ot_pair, honest=False)
+    near = alice_view(BOB_PATH, ot_pair, honest=False)
+    assert indistinguishable(far, near) != []

@@ -12,13 +12,15 @@ from protocol.errors import RemoteProtocolError
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob, State
 from protocol.loopback import run_paths
+from protocol.suite_compact import Offer
 from protocol.wire import HEADER_SIZE, Hello, MsgType, Suite, frame, unframe
 
-GRID = GridSpec(GridKind.PLANE, 99)
+from .paths import GRID
+
 ALICE_PATH = ((0, 0), (10, 10), (20, 0))
 BOB_PATH = ((0, 10), (10, 0))
 FUZZ = settings(
-    max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+    max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
 
 grids = st.builds(
@@ -32,15 +34,29 @@ grids = st.builds(
 
 
 @given(
-    suites=st.sampled_from([(Suite.COMPACT,), (Suite.PAPER,), (Suite.COMPACT, Suite.PAPER)]),
-    key=st.binary(max_size=300),
+    suite=st.sampled_from(Suite),
     kappa=st.integers(0, 255),
     grid=grids,
     m=st.integers(0, 0xFFFF),
+    horizon=st.integers(0, 2**32 - 1),
+    nonce=st.binary(min_size=16, max_size=16),
+    offer=st.binary(max_size=300),
 )
-def test_hello_round_trip(suites: Any, key: bytes, kappa: int, grid: GridSpec, m: int) -> None:
-    hello = Hello(suites, (key,) * len(suites), kappa, grid, m)
+def test_hello_round_trip(
+    suite: Suite, kappa: int, grid: GridSpec, m: int, horizon: int, nonce: bytes, offer: bytes
+) -> None:
+    hello = Hello(suite, kappa, grid, m, horizon, nonce, offer)
     assert Hello.from_bytes(hello.to_bytes()) == hello
+
+
+@given(digits=st.integers(1, 8), setup_id=st.binary(min_size=16, max_size=16))
+def test_offer_round_trip(digits: int, setup_id: bytes) -> None:
+    offer = Offer(digits, setup_id)
+    assert Offer.from_bytes(offer.to_bytes()) == offer
+    with pytest.raises(RemoteProtocolError):
+        Offer.from_bytes(offer.to_bytes()[:-1])
+    with pytest.raises(RemoteProtocolError):
+        Offer.from_bytes(bytes([digits, 7]) + setup_id)
 
 
 @given(grid=grids)
@@ -49,18 +65,19 @@ def test_grid_round_trip(grid: GridSpec) -> None:
 
 
 def test_unframe_is_strict() -> None:
-    good = frame(MsgType.MASKED, b"abc")
-    assert unframe(good, MsgType.MASKED) == b"abc"
+    good = frame(MsgType.PRODUCTS, 3, b"abc")
+    assert unframe(good, MsgType.PRODUCTS, 3) == b"abc"
     for bad in (
         good[: HEADER_SIZE - 1],
         b"XX" + good[2:],
         good[:2] + b"\x09" + good[3:],
-        good[:3] + bytes([MsgType.BITS]) + good[4:],
+        good[:3] + bytes([MsgType.DIGITS]) + good[4:],
+        good[:4] + b"\x05" + good[5:],  # a stale or early message: wrong step
         good + b"\x00",
         good[:-1],
     ):
         with pytest.raises(RemoteProtocolError):
-            unframe(bad, MsgType.MASKED)
+            unframe(bad, MsgType.PRODUCTS, 3)
 
 
 @settings(max_examples=300)
@@ -74,46 +91,56 @@ def test_arbitrary_bytes_as_hello(data: bytes) -> None:
 @given(body=st.binary(max_size=120))
 def test_arbitrary_hello_bodies(body: bytes) -> None:
     try:
-        Hello.from_bytes(frame(MsgType.HELLO, body))
+        Hello.from_bytes(frame(MsgType.HELLO, 1, body))
     except RemoteProtocolError:
         pass
 
 
+# --------------------------------------------------------------------------- recorded runs
+
+
+class Recorder:
+    def __init__(self, machine: Any, frames: list[bytes]) -> None:
+        self.machine, self.frames = machine, frames
+
+    def start(self) -> bytes:
+        out: bytes = self.machine.start()
+        self.frames.append(out)
+        return out
+
+    def receive(self, data: bytes) -> bytes | None:
+        out: bytes | None = self.machine.receive(data)
+        if out is not None:
+            self.frames.append(out)
+        return out
+
+
+def fresh(suite: Suite, keys: Any, ot_pair: Any) -> tuple[Alice, Bob]:
+    return (
+        Alice(ALICE_PATH, GRID, suite=suite, setup=ot_pair.holder),
+        Bob(BOB_PATH, keys=keys.bob, setups=ot_pair.setups),
+    )
+
+
 @pytest.fixture(scope="module")
-def recorded(path_keys: Any) -> list[bytes]:
-    """The eight frames of one honest run."""
-    frames: list[bytes] = []
-
-    class Recorder:
-        def __init__(self, machine: Any) -> None:
-            self.machine = machine
-
-        def start(self) -> bytes:
-            out: bytes = self.machine.start()
-            frames.append(out)
-            return out
-
-        def receive(self, data: bytes) -> bytes | None:
-            out: bytes | None = self.machine.receive(data)
-            if out is not None:
-                frames.append(out)
-            return out
-
-    alice = Alice(ALICE_PATH, GRID, {Suite.COMPACT: path_keys.alice[Suite.COMPACT]})
-    bob = Bob(BOB_PATH, path_keys.bob)
-    run_paths(Recorder(alice), Recorder(bob))  # type: ignore[arg-type]
-    assert len(frames) == 8
-    return frames
+def recorded(keys: Any, ot_pair: Any) -> dict[Suite, list[bytes]]:
+    out = {}
+    for suite in Suite:
+        frames: list[bytes] = []
+        alice, bob = fresh(suite, keys, ot_pair)
+        run_paths(Recorder(alice, frames), Recorder(bob, frames))  # type: ignore[arg-type]
+        out[suite] = frames
+    return out
 
 
-def machine_at(step: int, frames: list[bytes], keys: Any) -> Any:
-    """A fresh machine waiting for frame ``step`` (0-based), fed the recorded frames before."""
-    if step % 2 == 0:  # Bob receives frames 0, 2, 4, 6
-        bob = Bob(BOB_PATH, keys.bob)
+def machine_at(step: int, frames: list[bytes], suite: Suite, keys: Any, ot_pair: Any) -> Any:
+    """A fresh machine waiting for frame ``step`` (0-based), fed the recorded frames before
+    (its own nonce differs from the recording, so it computes garbage: sizes still fit)."""
+    alice, bob = fresh(suite, keys, ot_pair)
+    if step % 2 == 0:
         for k in range(0, step, 2):
             bob.receive(frames[k])
         return bob
-    alice = Alice(ALICE_PATH, GRID, {Suite.COMPACT: keys.alice[Suite.COMPACT]})
     alice.start()
     for k in range(1, step, 2):
         alice.receive(frames[k])
@@ -138,38 +165,48 @@ def mutate(data: bytes, mutation: tuple[str, int, int]) -> bytes:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("step", range(1, 8))
+@pytest.mark.parametrize("suite", list(Suite))
+@pytest.mark.parametrize("step", range(0, 8))
 @FUZZ
 @given(mutation=mutations)
 def test_mutated_frames_raise_only_the_documented_error(
-    step: int, mutation: Any, recorded: list[bytes], path_keys: Any
+    suite: Suite, step: int, mutation: Any, recorded: Any, keys: Any, ot_pair: Any
 ) -> None:
-    machine = machine_at(step, recorded, path_keys)
+    frames = recorded[suite]
+    machine = machine_at(step, frames, suite, keys, ot_pair)
     try:
-        machine.receive(mutate(recorded[step], mutation))
+        machine.receive(mutate(frames[step], mutation))
     except RemoteProtocolError:
         assert machine.state is State.FAILED
 
 
-@pytest.mark.parametrize("step", range(1, 8))
-def test_frame_bodies_of_wrong_type_or_size(
-    step: int, recorded: list[bytes], path_keys: Any
+@pytest.mark.parametrize("suite", list(Suite))
+def test_every_frame_of_wrong_type_or_size(
+    suite: Suite, recorded: Any, keys: Any, ot_pair: Any
 ) -> None:
-    machine = machine_at(step, recorded, path_keys)
-    with pytest.raises(RemoteProtocolError):
-        machine.receive(recorded[step - 1])  # the previous frame, wrong type
-    machine = machine_at(step, recorded, path_keys)
-    with pytest.raises(RemoteProtocolError):
-        machine.receive(recorded[step][:-1])
-    assert machine.state is State.FAILED
+    frames = recorded[suite]
+    assert len(frames) >= 8
+    for step in range(1, len(frames)):
+        machine = machine_at(step, frames, suite, keys, ot_pair)
+        with pytest.raises(RemoteProtocolError):
+            machine.receive(frames[step - 1])  # the previous frame: wrong type or step
+        assert machine.state is State.FAILED
+        machine = machine_at(step, frames, suite, keys, ot_pair)
+        with pytest.raises(RemoteProtocolError):
+            machine.receive(frames[step][:-1])
+        machine = machine_at(step, frames, suite, keys, ot_pair)
+        with pytest.raises(RemoteProtocolError):
+            machine.receive(frames[step] + b"\x00")
 
 
 @settings(
     max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
 @given(body=st.binary(max_size=600))
-def test_arbitrary_keys_bodies(body: bytes, path_keys: Any) -> None:
-    alice = Alice(ALICE_PATH, GRID, {Suite.COMPACT: path_keys.alice[Suite.COMPACT]})
+def test_arbitrary_offer_bodies(body: bytes, ot_pair: Any) -> None:
+    alice = Alice(ALICE_PATH, GRID, setup=ot_pair.holder)
     alice.start()
-    with pytest.raises(RemoteProtocolError):
-        alice.receive(frame(MsgType.KEYS, body))
+    try:
+        alice.receive(frame(MsgType.OFFER, 2, body))
+    except RemoteProtocolError:
+        assert alice.state is State.FAILED

@@ -30,6 +30,7 @@ def test_profile_names_are_stable() -> None:
         "eu868-sf7",
         "eu868-sf9",
         "eu868-sf12",
+        "eu868-g3-sf7",
         "us915-sf7",
         "us915-sf9",
         "ideal",

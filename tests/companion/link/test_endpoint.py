@@ -202,12 +202,14 @@ def test_sessions_opened_by_peers_are_bounded() -> None:
     run_simulated(main())
 
 
-def test_three_nodes_share_one_channel_with_collisions() -> None:
-    """Two senders talk to one receiver at once: their frames collide, ARQ sorts it out."""
+@pytest.mark.parametrize("carrier_sense", [False, True])
+def test_three_nodes_share_one_channel_with_collisions(carrier_sense: bool) -> None:
+    """Two senders talk to one receiver at once: without listen-before-talk their frames
+    collide and ARQ sorts it out; with it, they take turns and collisions all but vanish."""
 
     async def main() -> None:
         clock = Clock()
-        channel = Channel(Impairments(loss=0.05), seed=4)
+        channel = Channel(Impairments(loss=0.05), seed=4, carrier_sense=carrier_sense)
         medium = SimMedium(channel, clock)
         link = PROFILES["us915-sf7"]
         nodes = [LinkEndpoint(n, medium.attach(n), link, clock=clock) for n in (1, 2, 3)]
@@ -229,7 +231,10 @@ def test_three_nodes_share_one_channel_with_collisions() -> None:
         task = asyncio.create_task(receiver())
         await asyncio.gather(sender(nodes[0]), sender(nodes[2]))
         assert await task == payloads
-        assert channel.stats.collisions > 0
+        if carrier_sense:
+            assert channel.stats.collisions <= 2  # only frames started at the same instant
+        else:
+            assert channel.stats.collisions > 0
         for node in nodes:
             await node.close()
 

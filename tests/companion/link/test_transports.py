@@ -28,8 +28,8 @@ async def _protocol_run(a: LinkEndpoint, b: LinkEndpoint) -> None:
     party = Party.generate(Suite.COMPACT)
     grid = GridSpec(GridKind.PLANE, 50)
     alice_path, bob_path = ((-40, 0), (0, 3), (40, 0)), ((0, -40), (2, 40))
-    alice = Alice(alice_path, grid, party.alice_keys)
-    bob = Bob(bob_path, party.bob_keys)
+    alice = Alice(alice_path, grid, setup=party.setup)
+    bob = Bob(bob_path, setups=party.setups)
 
     async def bob_side() -> None:
         peer, session = await b.accept(timeout=30)

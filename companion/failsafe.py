@@ -1,0 +1,75 @@
+"""Will a comparison's result arrive in time?  (pure: sizes, profile and clock are arguments)
+
+Before and during a run Alice compares two times:
+
+* the time the run still needs: its messages (their exact sizes are public before the run,
+  :func:`protocol.suite_compact.message_sizes`) as frames on the profile, acknowledgements,
+  turnarounds and the expected retransmissions, delayed further where her own duty-cycle
+  budget runs out (the peer's is taken to be like hers); then the edit and the climb;
+* the worst-case time until the peer could be here (:func:`companion.peers.time_to_meet`).
+
+When the second is not larger than the first plus a margin, the result cannot be trusted to
+arrive in time and she takes the configured precautionary action (climb over, or hold before,
+the segments within the peer's reach).  It is the last line of defence: the look-ahead runs
+exist so that it never has to act.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from .link.airtime import DutyCycle, LinkProfile
+from .link.frames import MAX_ACK_BITMAP, OVERHEAD
+
+
+class Action(enum.Enum):
+    CLIMB = "climb"  # fly the segments within the peer's reach one level up
+    HOLD = "hold"  # pause the mission before the first of them until the result arrives
+    OFF = "off"  # only report
+
+
+@dataclass(frozen=True)
+class FailsafeSettings:
+    action: Action = Action.CLIMB
+    margin_s: float = 10.0  # on top of the estimate: edit upload, climb, slack
+    loss: float = 0.1  # frame loss the estimate allows for
+    floor_m_s: float = 5.0  # speed assumed at least for any drone (hover may turn to flight)
+    reach_margin_m: float = 100.0
+
+
+def run_seconds(
+    sizes: Sequence[tuple[bool, int]],
+    profile: LinkProfile,
+    *,
+    loss: float,
+    duty: DutyCycle | None = None,
+    now: float = 0.0,
+) -> float:
+    """Seconds of link time for messages (sent by Alice?, bytes), one after the other."""
+    payload = profile.max_frame - OVERHEAD
+    full = profile.airtime(profile.max_frame)
+    ack = profile.airtime(OVERHEAD + 2 + MAX_ACK_BITMAP)
+    total = 0.0
+    spent = 0.0  # Alice's airtime so far (duty-cycle budget)
+    for alice_sends, size in sizes:
+        frames = max(1, math.ceil(size / payload))
+        last = size - (frames - 1) * payload
+        airtime = (frames - 1) * full + profile.airtime(last + OVERHEAD)
+        bursts = math.ceil(frames / 64)
+        message = (airtime + bursts * ack) / (1.0 - loss) + 2 * frames * profile.turnaround_s
+        total += message
+        if alice_sends:
+            spent += airtime / (1.0 - loss)
+    if duty is not None and duty.budget_s is not None:
+        start = duty.earliest(now, min(spent, duty.budget_s * (1 - duty.reserve)))
+        total += max(start - now, 0.0)
+        if spent > duty.budget_s * (1 - duty.reserve):  # more than one window's budget
+            total += (spent / (duty.budget_s * (1 - duty.reserve)) - 1) * duty.window_s
+    return total
+
+
+def too_late(seconds_needed: float, seconds_to_meet: float, settings: FailsafeSettings) -> bool:
+    return seconds_to_meet <= seconds_needed + settings.margin_s

@@ -1,0 +1,151 @@
+"""What a companion knows about each peer it hears (pure): beacons, speed, urgency, reach.
+
+Distances are on the local tangent plane (:func:`companion.mission.ground_offset`); speeds
+come from successive beacons.  Urgency (:func:`time_to_meet`) comes from the rate at which
+the distance shrinks, beacon to beacon, or, without a fresh measurement, from the worst case:
+the two drones flying straight at each other, never below ``floor_m_s`` each.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from .beacon import Beacon
+from .mission import ground_offset
+
+
+def distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
+    """Ground distance between two degE7 points."""
+    return math.hypot(*ground_offset(a[0] / 1e7, a[1] / 1e7, b[0] / 1e7, b[1] / 1e7))
+
+
+def segment_distance_m(p: tuple[int, int], a: tuple[int, int], b: tuple[int, int]) -> float:
+    """Ground distance from point p to segment ab (degE7), on the tangent plane at p."""
+    ay, ax = ground_offset(p[0] / 1e7, p[1] / 1e7, a[0] / 1e7, a[1] / 1e7)
+    by, bx = ground_offset(p[0] / 1e7, p[1] / 1e7, b[0] / 1e7, b[1] / 1e7)
+    dx, dy = bx - ax, by - ay
+    length2 = dx * dx + dy * dy
+    t = 0.0 if length2 == 0 else max(0.0, min(1.0, -(ax * dx + ay * dy) / length2))
+    return math.hypot(ax + t * dx, ay + t * dy)
+
+
+def path_length_m(path: Sequence[tuple[int, int]]) -> float:
+    return sum(distance_m(a, b) for a, b in itertools.pairwise(path))
+
+
+def cut_at(
+    path: Sequence[tuple[int, int]],
+    horizon_m: float,
+    position: tuple[int, int] | None = None,
+) -> list[tuple[int, int]]:
+    """The path up to the first vertex at least ``horizon_m`` ahead (whole segments, so
+    nothing is rounded); all of it for a horizon of 0.  Distances count from ``position``
+    (the drone, somewhere on the first segment) when given, else from the first vertex."""
+    if horizon_m <= 0 or len(path) < 2:
+        return list(path)
+    out = [path[0]]
+    for k, (a, b) in enumerate(itertools.pairwise(path)):
+        out.append(b)
+        horizon_m -= distance_m(position if position is not None and k == 0 else a, b)
+        if horizon_m <= 0:
+            break
+    return out
+
+
+@dataclass
+class Peer:
+    node: int
+    beacon: Beacon
+    heard_at: float
+    speed_m_s: float = 0.0
+    role: str | None = None  # "alice" or "bob" once this pair has met: roles then stay
+    compared: tuple[int, int] | None = None  # (peer's, our) mission versions of the last run
+    next_try: float = 0.0
+    conflicts: set[int] = field(default_factory=set)  # our segments that meet its path
+    plan: list[tuple[str, int]] = field(default_factory=list)  # runs still to do (phase, horizon)
+    plan_version: tuple[int, int] | None = None  # the versions the plan was made for
+    covered: set[int] = field(default_factory=set)  # our segments a finished run compared
+    full_after: float = 0.0  # link time before which the full run waits
+    gap_m: float | None = None  # distance to us when last heard
+    range_rate: float = 0.0  # m/s, positive while we fly apart
+    measured: bool = False  # range_rate comes from two beacons
+
+    @property
+    def position(self) -> tuple[int, int]:
+        return self.beacon.lat, self.beacon.lon
+
+    def heard(
+        self, beacon: Beacon, now: float, own: tuple[int, int], *, max_speed: float = 40.0
+    ) -> None:
+        """A new beacon: update the speed estimate (smoothed, capped: beacon positions are
+        coarse and a take-off jump is not a speed), the rate at which the distance to us
+        changes, and the position."""
+        dt = now - self.heard_at
+        gap = distance_m(own, (beacon.lat, beacon.lon))
+        if dt > 1.0:
+            speed = min(distance_m(self.position, (beacon.lat, beacon.lon)) / dt, max_speed)
+            self.speed_m_s = speed if self.speed_m_s == 0 else 0.5 * (self.speed_m_s + speed)
+            if self.gap_m is not None:
+                self.range_rate = (gap - self.gap_m) / dt
+                self.measured = True
+        self.beacon, self.heard_at, self.gap_m = beacon, now, gap
+
+
+SEPARATING_M_S = 2.0  # a range rate above this: the two fly apart
+MIN_CLOSING_M_S = 2.0  # a measured closing rate is taken as at least this
+FRESH_S = 15.0  # a range rate older than this is not trusted
+
+
+def time_to_meet(
+    own: tuple[int, int],
+    own_speed: float,
+    peer: Peer,
+    *,
+    floor_m_s: float,
+    now: float | None = None,
+) -> float:
+    """Seconds until the two drones could meet.  With a fresh measurement (two beacons, the
+    last one less than ``FRESH_S`` old; a turn shows within one interval) at the rate their
+    distance shrinks, at least ``MIN_CLOSING_M_S``; otherwise flying straight at each other,
+    each at least ``floor_m_s``.  Infinite while they clearly fly apart."""
+    fresh = peer.measured and (now is None or now - peer.heard_at <= FRESH_S)
+    if fresh and peer.range_rate > SEPARATING_M_S:
+        return math.inf
+    if fresh:
+        closing = max(-peer.range_rate, MIN_CLOSING_M_S)
+    else:
+        closing = max(own_speed, floor_m_s) + max(peer.speed_m_s, floor_m_s)
+    return distance_m(own, peer.position) / closing
+
+
+def segments_within(
+    path: Sequence[tuple[int, int]], first: int, point: tuple[int, int], reach_m: float
+) -> list[int]:
+    """Indices (``first`` + k) of the path's segments that come within ``reach_m`` of
+    ``point``."""
+    return [
+        first + k
+        for k, (a, b) in enumerate(itertools.pairwise(path))
+        if segment_distance_m(point, a, b) <= reach_m
+    ]
+
+
+def reached_within(
+    path: Sequence[tuple[int, int]],
+    first: int,
+    position: tuple[int, int] | None,
+    distance: float,
+) -> set[int]:
+    """Indices (``first`` + k) of the segments the drone starts within ``distance`` metres
+    along its path from ``position`` (the current segment counts at once)."""
+    out = {first}
+    travelled = 0.0
+    for k, (a, b) in enumerate(itertools.pairwise(path)):
+        travelled += distance_m(position if position is not None and k == 0 else a, b)
+        if travelled > distance or k + 1 >= len(path) - 1:
+            break
+        out.add(first + k + 1)
+    return out

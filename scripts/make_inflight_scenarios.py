@@ -1,0 +1,62 @@
+"""Write the in-flight scenarios' missions (``sitl_configs/scenarios/inflight_*.plan``).
+
+Every drone takes off at once and flies a straight multi-leg route at 30 m through a common
+crossing point C, so that without the companion they would meet there.  Distances are metres
+from C on the local tangent plane; the routes are written as QGroundControl .plan files.
+Run from the repository root: ``.venv/bin/python scripts/make_inflight_scenarios.py``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from companion.mission import NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT, MissionItem
+from companion.missionfile import write_plan
+
+C = (47.4000, 8.5450)
+ALT = 30.0
+OUT = Path(__file__).resolve().parent.parent / "sitl_configs" / "scenarios"
+
+
+def at(east: float, north: float) -> tuple[float, float]:
+    lat = C[0] + math.degrees(north / 6_371_000.0)
+    lon = C[1] + math.degrees(east / (6_371_000.0 * math.cos(math.radians(C[0]))))
+    return lat, lon
+
+
+def route(name: str, heading_deg: float, stations: list[float], home_back: float = 60.0) -> None:
+    """A straight route along ``heading_deg`` (0 = north) through C: waypoints at the given
+    distances from C (negative: before C), home ``home_back`` metres before the first."""
+    ux, uy = math.sin(math.radians(heading_deg)), math.cos(math.radians(heading_deg))
+
+    def point(d: float) -> tuple[float, float]:
+        return at(ux * d, uy * d)
+
+    home = point(stations[0] - home_back)
+
+    def item(command: int, d: float, alt: float) -> MissionItem:
+        lat, lon = point(d)
+        return MissionItem(
+            len(items), 3, command, 0, 1, 0.0, 0.0, 0.0, math.nan,
+            round(lat * 1e7), round(lon * 1e7), alt,
+        )  # fmt: skip
+
+    items = [MissionItem(0, 3, NAV_TAKEOFF, 1, 1, 0.0, 0.0, 0.0, math.nan, 0, 0, ALT)]
+    for d in stations:
+        items.append(item(NAV_WAYPOINT, d, ALT))
+    items.append(item(NAV_LAND, stations[-1] + 20, 0.0))
+    write_plan(OUT / f"{name}.plan", items, [home[0], home[1], 488.0])
+
+
+if __name__ == "__main__":
+    # Crossing at right angles, 600 m out: they meet about 70 s after take-off.
+    route("inflight_east", 90.0, [-600, -250, 250, 600])
+    route("inflight_north", 0.0, [-600, -150, 350, 600])
+    # Head-on along one line from 1.8 km apart: they meet after about 95 s.
+    route("inflight_headon_east", 90.0, [-900, -300, 300, 900])
+    route("inflight_headon_west", 270.0, [-900, -500, 100, 900])
+    # Three drones through one point, 1.5 km out (three first contacts share one channel).
+    route("inflight_star_east", 90.0, [-1500, -500, 500, 1500])
+    route("inflight_star_north", 0.0, [-1500, -600, 400, 1500])
+    route("inflight_star_northeast", 45.0, [-1500, -400, 600, 1500])

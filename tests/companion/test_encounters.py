@@ -1,0 +1,168 @@
+"""The pure pieces of in-flight encounters: peers, look-ahead cuts, levels, run-time estimates,
+radio turns, and the planner's levels."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import pytest
+
+from companion.beacon import Beacon, BeaconError
+from companion.failsafe import FailsafeSettings, run_seconds, too_late
+from companion.levels import assign, levels_mask
+from companion.link import PROFILES, Impairments
+from companion.link.airtime import DutyCycle
+from companion.over_link import link_case
+from companion.peers import (
+    Peer,
+    cut_at,
+    distance_m,
+    reached_within,
+    segments_within,
+    time_to_meet,
+)
+from companion.planner import plan_offsets
+from companion.radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
+from companion.runtime import box_radius_m
+from protocol.compare import Case, Party
+from protocol.grid import GridKind, GridSpec
+from protocol.suite_compact import message_sizes
+from protocol.wire import Suite
+
+from .missions import survey
+
+LAT, LON = 473_977_420, 85_455_940
+M_PER_E7_LAT = 0.0111195  # metres per degE7 of latitude
+
+
+def north(metres: float) -> tuple[int, int]:
+    return (LAT + round(metres / M_PER_E7_LAT), LON)
+
+
+def beacon(position: tuple[int, int], levels: int = 0) -> Beacon:
+    return Beacon(
+        position[0], position[1], 518, False, frozenset({Suite.COMPACT}), 7, b"i" * 8, levels
+    )
+
+
+def test_beacon_round_trip_and_levels() -> None:
+    b = beacon(north(100), levels=0b0110)
+    assert len(b.encode()) == 24
+    assert Beacon.decode(b.encode()).encode() == b.encode()
+    assert Beacon.decode(b.encode()).levels == 0b0110
+    bad = bytearray(b.encode())
+    bad[-9] |= 1  # level 0 is not a climb
+    with pytest.raises(BeaconError):
+        Beacon.decode(bytes(bad))
+
+
+def test_cut_counts_from_the_drone() -> None:
+    path = [north(0), north(300), north(600), north(900)]
+    assert cut_at(path, 0) == path
+    assert cut_at(path, 250) == path[:2]
+    assert cut_at(path, 350) == path[:3]
+    # 100 m flown on the first segment: 350 m ahead reaches 650 m, the third vertex's leg
+    assert cut_at(path, 350, north(100)) == path[:3]
+    assert cut_at(path, 150, north(200)) == path[:3]
+    assert reached_within(path, 4, north(250), 100) == {4, 5}
+    assert reached_within(path, 4, north(250), 10) == {4}
+    assert segments_within(path, 4, north(1000), 150) == [6]
+
+
+def test_time_to_meet_worst_case_then_measured() -> None:
+    peer = Peer(2, beacon(north(1000)), heard_at=0.0)
+    assert time_to_meet(north(0), 0.0, peer, floor_m_s=5.0) == pytest.approx(100.0, rel=0.01)
+    peer.heard(beacon(north(1000)), 5.0, north(0))  # hovering: its speed is 0 so far
+    peer.heard(beacon(north(900)), 10.0, north(0))  # closing at 20 m/s: 900 m in 45 s
+    assert time_to_meet(north(0), 0.0, peer, floor_m_s=5.0, now=10.0) == pytest.approx(
+        45.0, rel=0.02
+    )
+    peer.heard(beacon(north(850)), 20.0, north(0))  # now closing at 5 m/s
+    assert time_to_meet(north(0), 0.0, peer, floor_m_s=5.0, now=20.0) == pytest.approx(
+        170.0, rel=0.02
+    )
+    peer.heard(beacon(north(1000)), 30.0, north(0))  # flying apart now
+    assert time_to_meet(north(0), 0.0, peer, floor_m_s=5.0, now=30.0) == math.inf
+    # a stale measurement falls back to the worst case
+    assert time_to_meet(north(0), 10.0, peer, floor_m_s=5.0, now=60.0) < 100.0
+
+
+def test_levels_avoid_what_peers_announce() -> None:
+    assert assign({2: {1, 2}}, {}) == {1: 1, 2: 1}
+    assert assign({2: {1}, 3: {1}}, {2: 1 << 1}) == {1: 2}
+    assert assign({2: {1}, 3: {3}}, {2: 0b0110, 3: 1 << 1}) == {1: 3, 3: 2}
+    assert levels_mask({1: 1, 3: 2}) == 0b0110
+
+
+def test_planner_levels() -> None:
+    items = survey(6)
+    one = plan_offsets(items, {1: 1})
+    two = plan_offsets(items, {1: 2, 2: 1})
+    deltas_one = [b.z - a.z for a, b in zip(items, one, strict=True)]
+    deltas_two = [b.z - a.z for a, b in zip(items, two, strict=True)]
+    assert sorted(set(deltas_one)) == [0.0, 10.0]
+    assert sorted(set(deltas_two)) == [0.0, 10.0, 20.0]  # the shared vertex takes the higher
+
+
+def test_box_radius_doubles_until_the_path_fits() -> None:
+    assert box_radius_m([north(100)], north(0), 500.0) == 500.0
+    assert box_radius_m([north(800)], north(0), 500.0) == 1000.0
+    assert box_radius_m([north(3000)], north(0), 500.0) == 4000.0
+
+
+def test_estimate_matches_the_simulated_radio() -> None:
+    """The fail-safe's estimate of a run against the link's own accounting (virtual time)."""
+    grid = GridSpec(GridKind.PLANE, 2000)
+    case = Case(((0, 0), (500, 20), (900, -40)), ((400, -300), (420, 300), (800, 600)), grid)
+    party = Party.generate(Suite.COMPACT)
+    for profile in ("us915-sf7", "eu868-sf7"):
+        measured = [
+            link_case(case, party, PROFILES[profile], Impairments(loss=0.1), seed)[
+                "wall_s_simulated"
+            ]
+            for seed in range(1, 6)
+        ]
+        estimate = run_seconds(message_sizes(2, 2, grid), PROFILES[profile], loss=0.1)
+        assert min(measured) * 0.5 < estimate < max(measured) * 1.5, (estimate, measured)
+
+
+def test_estimate_counts_the_duty_cycle() -> None:
+    profile = PROFILES["eu868-sf7"]
+    sizes = [(True, 5000), (False, 5000)]
+    fresh = DutyCycle(profile.budget_s, profile.duty_window_s, 0.1)
+    spent = DutyCycle(profile.budget_s, profile.duty_window_s, 0.1)
+    spent.record(0.0, 30.0)  # most of the hour's 36 s already used
+    quick = run_seconds(sizes, profile, loss=0.1, duty=fresh, now=10.0)
+    slow = run_seconds(sizes, profile, loss=0.1, duty=spent, now=10.0)
+    assert quick < 60 and slow > 3000  # the budget returns only as the hour rolls on
+    settings = FailsafeSettings()
+    assert too_late(slow, 600.0, settings) and not too_late(quick, 600.0, settings)
+
+
+def test_radio_turns_by_priority() -> None:
+    async def main() -> list[int]:
+        radio = RadioTurns()
+        order: list[int] = []
+
+        async def use(priority: int, hold: float) -> None:
+            async with radio.turn(priority):
+                order.append(priority)
+                await asyncio.sleep(hold)
+
+        first = asyncio.create_task(use(OWN_FULL, 0.05))
+        await asyncio.sleep(0.01)
+        waiting = [asyncio.create_task(use(p, 0.0)) for p in (OWN_FULL, ANSWER_FULL, OWN_NEAR)]
+        await asyncio.sleep(0.001)
+        waiting.append(asyncio.create_task(use(ANSWER_NEAR, 0.0)))
+        await asyncio.gather(first, *waiting)
+        assert not radio.taken
+        return order
+
+    assert asyncio.run(main()) == [OWN_FULL, ANSWER_NEAR, OWN_NEAR, ANSWER_FULL, OWN_FULL]
+
+
+def test_profiles() -> None:
+    g3 = PROFILES["eu868-g3-sf7"]
+    assert g3.duty_cycle == 0.10 and g3.budget_s == pytest.approx(360.0)
+    assert distance_m(north(0), north(1000)) == pytest.approx(1000.0, rel=0.001)
