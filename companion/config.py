@@ -6,6 +6,7 @@
     autopilot = "udpin://0.0.0.0:14540"   # MAVSDK URL; PX4 SITL instance i: 14540 + i
     ardupilot = false
     suite = "compact"                     # or "paper" (Paillier + DGK, the paper's design)
+    ot_security = 112                     # compact suite, as Alice: 112 or 128-bit OT (Delta)
     log_level = "info"
     [link]
     transport = "udp"                     # "udp" (a link hub) or "serial" (a LoRa modem)
@@ -36,6 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from protocol.ot.setup import DEFAULT_SECURITY, SECURITY_LEVELS
 from protocol.wire import Suite
 
 from .failsafe import Action, FailsafeSettings
@@ -122,6 +124,9 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     suite = _get(doc, "suite", str, "compact")
     if suite not in suites:
         raise ConfigError(f"suite: one of {', '.join(suites)}")
+    ot_security = _get(doc, "ot_security", int, DEFAULT_SECURITY)
+    if ot_security not in SECURITY_LEVELS:
+        raise ConfigError(f"ot_security: one of {', '.join(map(str, SECURITY_LEVELS))}")
     actions = {a.value: a for a in Action}
     action = _get(failsafe, "action", str, "climb")
     if action not in actions:
@@ -142,6 +147,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         autopilot_url=_get(doc, "autopilot", str, "udpin://0.0.0.0:14540"),
         ardupilot=_get(doc, "ardupilot", bool, False),
         suite=suites[suite],
+        ot_security=ot_security,
         offset=offset_settings,
         beacon_interval_s=numbers["beacon_interval_s"],
         initiation_range_m=numbers["initiation_range_m"],

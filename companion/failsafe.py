@@ -10,7 +10,7 @@ Before and during a run Alice compares two times:
 
 When the second is not larger than the first plus a margin, the result cannot be trusted to
 arrive in time and she takes the configured precautionary action (climb over, or hold before,
-the segments within the peer's reach).  It is the last line of defence: the look-ahead runs
+the segments at risk: :func:`at_risk`).  It is the last line of defence: the look-ahead runs
 exist so that it never has to act.
 """
 
@@ -23,6 +23,9 @@ from dataclasses import dataclass
 
 from .link.airtime import DutyCycle, LinkProfile
 from .link.frames import MAX_ACK_BITMAP, OVERHEAD
+from .peers import reached_within, segments_within
+
+Point = tuple[int, int]
 
 
 class Action(enum.Enum):
@@ -73,3 +76,25 @@ def run_seconds(
 
 def too_late(seconds_needed: float, seconds_to_meet: float, settings: FailsafeSettings) -> bool:
     return seconds_to_meet <= seconds_needed + settings.margin_s
+
+
+def at_risk(
+    path: Sequence[Point],
+    first: int,
+    here: Point | None,
+    own_speed_m_s: float,
+    peer: Point,
+    peer_speed_m_s: float,
+    seconds: float,
+    settings: FailsafeSettings,
+    decided: set[int] | frozenset[int] = frozenset(),
+) -> list[int]:
+    """Segments (``first`` + k of ``path``) a precaution must cover if the result may take
+    ``seconds`` more: those the peer could reach by then *and* we enter by then (each drone
+    flying at least ``floor_m_s``, plus the margin); a segment we enter later hears the
+    result first, and ``decided`` ones (a finished run compared them) need nothing."""
+    window = seconds + settings.margin_s
+    reach = max(peer_speed_m_s, settings.floor_m_s) * window + settings.reach_margin_m
+    ahead = max(own_speed_m_s, settings.floor_m_s) * window + settings.reach_margin_m
+    ours = reached_within(path, first, here, ahead)
+    return [k for k in segments_within(path, first, peer, reach) if k in ours and k not in decided]

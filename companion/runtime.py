@@ -33,7 +33,7 @@ from protocol.budget import BudgetExceededError, RunBudget
 from protocol.errors import ProtocolError
 from protocol.grid import GridSpec
 from protocol.intersection import MAX_SEGMENTS, Alice, Bob, BobKeys, Limits
-from protocol.ot.setup import ChooserSetup, HolderSetup
+from protocol.ot.setup import DEFAULT_SECURITY, ChooserSetup, HolderSetup
 from protocol.suite_compact import message_sizes
 from protocol.wire import Hello, Suite
 
@@ -41,13 +41,13 @@ from .autopilot import Autopilot, AutopilotError
 from .beacon import SIZE as BEACON_SIZE
 from .beacon import Beacon, BeaconError, alice_of
 from .exchange import run_alice, serve_bob
-from .failsafe import Action, FailsafeSettings, run_seconds, too_late
+from .failsafe import Action, FailsafeSettings, at_risk, run_seconds, too_late
 from .levels import assign, levels_mask
 from .link.arq import LinkError, PeerAborted
 from .link.endpoint import ABORT_PROTOCOL, ABORT_REFUSED, LinkEndpoint
 from .link.frames import OVERHEAD
 from .mission import MissionItem, path_of, point_as_segment, remaining, vertices
-from .peers import Peer, cut_at, distance_m, segments_within, time_to_meet
+from .peers import Peer, cut_at, distance_m, time_to_meet
 from .planner import OffsetSettings, PlannerError, plan_offsets
 from .radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
 
@@ -66,6 +66,7 @@ class CompanionSettings:
     autopilot_url: str
     ardupilot: bool = False
     suite: Suite = Suite.COMPACT
+    ot_security: int = DEFAULT_SECURITY  # kappa of the OT setups we start (as Alice)
     offset: OffsetSettings = field(default_factory=OffsetSettings)
     beacon_interval_s: float = 10.0
     initiation_range_m: float = 5000.0
@@ -478,6 +479,7 @@ class Companion:
                     suite=self.settings.suite,
                     setup=setup,
                     horizon_m=horizon,
+                    ot_security=self.settings.ot_security,
                 )
             except ProtocolError as exc:
                 self.record("run_failed", peer=peer.node, phase=phase, error=str(exc))
@@ -552,7 +554,7 @@ class Companion:
         """Link seconds an m x m run will need (Bob's size taken as Alice's: it is unknown)."""
         if self.settings.suite is not Suite.COMPACT:
             return 0.0
-        sizes = message_sizes(m, m, grid, fresh_setup=fresh)
+        sizes = message_sizes(m, m, grid, fresh_setup=fresh, ot_security=self.settings.ot_security)
         return run_seconds(
             sizes,
             self.endpoint.profile,
@@ -584,12 +586,11 @@ class Companion:
         settings = self.settings.failsafe
         if peer.node in self.precaution or peer.node in self._holding or self.on_ground:
             return  # (on the ground the drone waits for its comparisons anyway)
-        reach = max(peer.speed_m_s, settings.floor_m_s) * (needed + settings.margin_s)
-        reach += settings.reach_margin_m
-        # Segments a finished run already compared with this peer are decided: no precaution.
-        risky = [
-            k for k in segments_within(path, start, peer.position, reach) if k not in peer.covered
-        ]
+        speed = max(self.speed_m_s, self.settings.cruise_m_s)
+        risky = at_risk(
+            path, start, self._here(), speed, peer.position, peer.speed_m_s, needed,
+            settings, peer.covered,
+        )  # fmt: skip
         if not risky:
             return
         self.record(

@@ -72,7 +72,7 @@ def _bench(args: argparse.Namespace) -> int:
     if args.what == "crypto":
         from .bench import bench_crypto, format_crypto
 
-        result = bench_crypto(repeat=args.repeat, progress=not args.quiet)
+        result = bench_crypto(repeat=args.repeat or 15, progress=not args.quiet)
         text = format_crypto(result)
     elif args.what == "link":
         from companion.over_link import bench_link, format_link
@@ -102,7 +102,9 @@ def _bench(args: argparse.Namespace) -> int:
         from .bench_paths import bench_scaling, format_scaling
 
         sizes = _sizes(args.sizes, default=(1, 2, 4, 8, 16, 32))
-        result = bench_scaling(sizes, args.suite, args.range or 99, progress=not args.quiet)
+        result = bench_scaling(
+            sizes, args.suite, args.range or 99, progress=not args.quiet, repeat=args.repeat or 3
+        )
         text = format_scaling(result)
     print(json.dumps(result, indent=2) if args.json else text)
     return 0
@@ -155,11 +157,13 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--range", type=int, default=None, help="coordinate range (scaling)")
     bench.add_argument("--profiles", help="comma-separated link profiles (link; default all)")
     bench.add_argument("--json", action="store_true", help="machine-readable output")
-    bench.add_argument("--repeat", type=int, default=15, help="runs per median (crypto)")
+    bench.add_argument(
+        "--repeat", type=int, default=None, help="runs per median (crypto: 15, scaling: 3)"
+    )
     bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     bench.set_defaults(func=_bench)
     args = parser.parse_args(argv)
-    if getattr(args, "repeat", 1) < 1:
+    if getattr(args, "repeat", None) is not None and args.repeat < 1:
         parser.error("--repeat must be at least 1")
     try:
         code: int = args.func(args)

@@ -23,7 +23,7 @@ from .dgk import DGKPrivateKey, DGKPublicKey
 from .loopback import Transcript, run_comparison, run_millionaires, run_ot_setup
 from .millionaire import DEFAULT_DIGIT_BITS, Shape
 from .ot.extension import chooser_extend, holder_extend
-from .ot.setup import ChooserSetup, HolderSetup
+from .ot.setup import DEFAULT_BLOCKS, ChooserSetup, HolderSetup, describe
 from .paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
 from .params import SecurityParameters
 
@@ -114,7 +114,8 @@ def ot_rows(repeat: int) -> tuple[list[Row], ChooserSetup, HolderSetup]:
     chooser, setup, _ = setup_runs[-1]
     rows: list[Row] = [
         {
-            "what": "OT setup (128 base OTs + 11 punctured trees), once per pair of drones",
+            "what": f"OT setup ({sum(setup.blocks)} base OTs + {len(setup.blocks)} punctured "
+            "trees), once per pair of drones",
             "cpu_alice_ms": 1e3 * statistics.median(r[2].cpu_alice for r in setup_runs),
             "cpu_bob_ms": 1e3 * statistics.median(r[2].cpu_bob for r in setup_runs),
             "bytes_alice_to_bob": setup_runs[0][2].bytes_alice_to_bob,
@@ -238,7 +239,7 @@ def bench_crypto(repeat: int = 15, progress: bool = True) -> dict[str, Any]:
             "dgk_u": dgk.public_key.u,
             "kappa": params.kappa,
             "curve": "secp256k1",
-            "ot": "SoftSpokenOT, 128-bit Delta in 10 blocks of 12 bits and one of 8",
+            "ot": describe(DEFAULT_BLOCKS),
             "repeat": repeat,
         },
         "primitives": primitives,

@@ -9,6 +9,7 @@ setup, the paper suite's key generation) is reported on its own line, with its b
 from __future__ import annotations
 
 import csv
+import dataclasses
 import secrets
 import statistics
 import sys
@@ -21,6 +22,7 @@ from .geometry import Point, path_hits
 from .grid import GridKind, GridSpec
 from .intersection import Alice, Bob
 from .loopback import run_paths
+from .ot.setup import DEFAULT_SECURITY
 from .wire import Suite
 
 DEFAULT_DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "anchor-data"
@@ -74,10 +76,12 @@ def bench_paper(
     _say(progress, f"generating keys ({suite})")
     party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
     cases = load_cases(data / "alices_segments.txt", data / "bobs_segments.txt")
-    pair_results = []
+    pair_results, first_results = [], []
     for number, case in enumerate(cases, start=1):
         _say(progress, f"pair {number}/{len(cases)}")
         pair_results.append(run_case(case, party))
+        if party.setup is not None:  # and as the first contact of two drones: a fresh setup
+            first_results.append(run_case(case, dataclasses.replace(party, setup=None, setups={})))
     expected_any: dict[int, bool] = {}
     csv_path = data / "testroutine.csv"
     if csv_path.exists():
@@ -111,6 +115,9 @@ def bench_paper(
         "route_grid_range": span,
         "route_comparison_bits": GridSpec(GridKind.PLANE, span).l,
         "pairs": _summary(pair_results, [1] * len(pair_results)),
+        "first_contact": _summary(first_results, [1] * len(first_results))
+        if first_results
+        else None,
         "routes": routes,
         "paper_published": PAPER_PUBLISHED,
         "paper_code_measured_here": PAPER_CODE_MEASURED,
@@ -118,7 +125,18 @@ def bench_paper(
 
 
 def format_paper(result: dict[str, Any]) -> str:
-    p, s = result["params"], result["pairs"]
+    p, s, f = result["params"], result["pairs"], result.get("first_contact")
+    total_note = " (keys included)" if f is None else " (OT setup cached)"
+    first_rows = (
+        []
+        if f is None
+        else [
+            f"| first contact (fresh OT setup), median bytes per pair | "
+            f"{f['median_bytes_total']:.0f} | - | - |",
+            f"| first contact (fresh OT setup), median CPU per pair, both | "
+            f"{f['median_cpu_s_total'] * 1e3:.1f} ms | - | - |",
+        ]
+    )
     lines = [
         f"Paper benchmark, suite {result['suite']} ({p['scheme']}), l = "
         f"{p['comparison_bits']} bits (range +-{p['grid_range']}); once per pair of drones: "
@@ -136,8 +154,9 @@ def format_paper(result: dict[str, Any]) -> str:
         f"| {PAPER_PUBLISHED['time_s']:.3f} s |",
         f"| median bytes per pair, A->B | {s['median_bytes_alice_to_bob']:.0f} | 40 400 | - |",
         f"| median bytes per pair, B->A | {s['median_bytes_bob_to_alice']:.0f} | 46 400 | - |",
-        f"| median bytes per pair, total (keys included) | {s['median_bytes_total']:.0f} "
+        f"| median bytes per pair, total{total_note} | {s['median_bytes_total']:.0f} "
         f"| 86 800 + 20.2 MB key | 4634 (object sizes) |",
+        *first_rows,
         f"| messages | {s['messages']:.0f} | about 96 | - |",
         "| security | 112-bit, nothing leaked | 80-bit DGK, leaks every bit | - |",
         "",
@@ -171,30 +190,41 @@ def bench_scaling(
     suite: str = "compact",
     range_: int = 99,
     progress: bool = True,
+    repeat: int = 3,
 ) -> dict[str, Any]:
-    """Random paths with n = m segments, coordinates in [-range, range]."""
+    """Random paths with n = m segments, coordinates in [-range, range]: ``repeat`` cases per
+    size (bytes depend on the sizes alone; CPU as medians)."""
     _say(progress, f"generating keys ({suite})")
     party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
     grid = GridSpec(GridKind.PLANE, range_)
+    once = party.once
+    setup_bytes = int(
+        once.get("setup_bytes_alice_to_bob", 0) + once.get("setup_bytes_bob_to_alice", 0)
+    )
     rows = []
     for size in sizes:
-        _say(progress, f"{size} x {size}")
-        case = Case(random_path(size, range_), random_path(size, range_), grid)
-        r = run_case(case, party)
+        results = []
+        for k in range(repeat):
+            _say(progress, f"{size} x {size} ({k + 1}/{repeat})")
+            case = Case(random_path(size, range_), random_path(size, range_), grid)
+            results.append(run_case(case, party))
+        r = results[-1]
         pairs = size * size
         total = r["bytes_alice_to_bob"] + r["bytes_bob_to_alice"]
         rows.append(
             {
                 "segments": size,
                 "pairs": pairs,
-                "correct": r["hits"] == r["plain_hits"],
+                "runs": repeat,
+                "correct": sum(x["hits"] == x["plain_hits"] for x in results),
                 "bytes_total": total,
                 "bytes_per_pair": total / pairs,
+                "bytes_first_contact": total + setup_bytes,
                 "bytes_alice_to_bob": r["bytes_alice_to_bob"],
                 "bytes_bob_to_alice": r["bytes_bob_to_alice"],
                 "messages": r["messages"],
-                "cpu_s_alice": r["cpu_s_alice"],
-                "cpu_s_bob": r["cpu_s_bob"],
+                "cpu_s_alice": statistics.median(x["cpu_s_alice"] for x in results),
+                "cpu_s_bob": statistics.median(x["cpu_s_bob"] for x in results),
             }
         )
     return {"suite": suite, "params": params_of(party, grid), "rows": rows}
@@ -205,17 +235,18 @@ def format_scaling(result: dict[str, Any]) -> str:
     lines = [
         f"Scaling, suite {result['suite']} ({p['scheme']}), random paths in "
         f"[-{p['grid_range']}, {p['grid_range']}]^2, l = {p['comparison_bits']} bits; once per "
-        f"pair of drones: {describe_once(p)}.  One run per size.",
+        f"pair of drones: {describe_once(p)}.  Bytes are fixed by the sizes (padded); CPU is "
+        "the median of the runs.",
         "",
-        "| n = m | pairs | correct | total bytes | bytes per pair | messages "
-        "| Alice CPU s | Bob CPU s |",
-        "|---:|---:|---|---:|---:|---:|---:|---:|",
+        "| n = m | pairs | correct | total bytes | bytes per pair | first contact bytes "
+        "| messages | Alice CPU s | Bob CPU s |",
+        "|---:|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in result["rows"]:
         lines.append(
-            f"| {r['segments']} | {r['pairs']} | {'yes' if r['correct'] else 'NO'} "
-            f"| {r['bytes_total']} | {r['bytes_per_pair']:.0f} | {r['messages']} "
-            f"| {r['cpu_s_alice']:.2f} | {r['cpu_s_bob']:.2f} |"
+            f"| {r['segments']} | {r['pairs']} | {r['correct']}/{r['runs']} "
+            f"| {r['bytes_total']} | {r['bytes_per_pair']:.0f} | {r['bytes_first_contact']} "
+            f"| {r['messages']} | {r['cpu_s_alice']:.2f} | {r['cpu_s_bob']:.2f} |"
         )
     return "\n".join(lines)
 
@@ -223,34 +254,48 @@ def format_scaling(result: dict[str, Any]) -> str:
 def bench_design(size: int = 8, range_: int = 99, progress: bool = True) -> dict[str, Any]:
     """The design study behind the compact suite: one size x size case, every variant.
 
-    Variants: the OT extension's block size (1 bit = IKNP's 128 bits per OT, 4, 8 = the
-    default; SoftSpokenOT sends 128 / k - 1 bits per OT and does 2^k work per block), the
-    millionaires' digit size, and the paper suite on the same paths.  Real bytes and CPU of
-    one run each (the OT setup made once per block size, not counted)."""
+    Variants: the OT extension's block size (1 bit = IKNP's kappa bits per OT; SoftSpokenOT
+    sends blocks - 1 bits per OT and does 2^k work per block; 12 = the default), its
+    security parameter kappa (112 = the default, 128), the millionaires' digit size (4 = the
+    default), and the paper suite on the same paths.  Real bytes and CPU of one run each;
+    the one-time OT setup (made once per variant) in its own columns."""
     grid = GridSpec(GridKind.PLANE, range_)
     case = Case(random_path(size, range_), random_path(size, range_), grid)
-    variants: list[tuple[str, int, int]] = [("compact", 8, w) for w in (2, 3, 4, 5, 6)]
-    variants += [("compact", 1, 4), ("compact", 4, 4), ("compact", 12, 4), ("paper", 0, 0)]
+    variants: list[tuple[str, int, int, int]] = [
+        ("compact", 12, w, DEFAULT_SECURITY) for w in (2, 3, 4, 5, 6)
+    ]
+    variants += [("compact", k, 4, DEFAULT_SECURITY) for k in (1, 4, 8)]
+    variants += [("compact", 12, 4, 128), ("paper", 0, 0, 0)]
     rows = []
-    parties: dict[int, Party] = {}
-    for suite, blocks, digits in variants:
-        _say(progress, f"{suite} blocks={blocks} digits={digits}")
+    parties: dict[tuple[int, int], Party] = {}
+    for suite, blocks, digits, security in variants:
+        _say(progress, f"{suite} blocks={blocks} digits={digits} kappa={security}")
         if suite == "paper":
             party = Party.generate(Suite.PAPER)
             alice, bob = case.machines(party)
+            setup_bytes = 0
         else:
-            party = parties.get(blocks) or Party.generate(Suite.COMPACT, block_bits=blocks)
-            parties[blocks] = party
-            alice = Alice(case.alice, grid, setup=party.setup, digit_bits=digits, block_bits=blocks)
+            key = (blocks, security)
+            party = parties.get(key) or Party.generate(
+                Suite.COMPACT, block_bits=blocks, ot_security=security
+            )
+            parties[key] = party
+            alice = Alice(case.alice, grid, setup=party.setup, digit_bits=digits)
             bob = Bob(case.bob, setups=party.setups)
+            setup_bytes = int(
+                party.once["setup_bytes_alice_to_bob"] + party.once["setup_bytes_bob_to_alice"]
+            )
         t = run_paths(alice, bob)
         rows.append(
             {
                 "suite": suite,
                 "ot_block_bits": blocks,
+                "ot_security": security,
                 "digit_bits": digits,
                 "correct": alice.hits == path_hits(case.alice, case.bob),
                 "bytes_total": t.bytes_alice_to_bob + t.bytes_bob_to_alice,
+                "setup_bytes": setup_bytes,
+                "setup_cpu_s": sum(v for k, v in party.once.items() if "cpu" in k),
                 "messages": t.messages,
                 "cpu_s_alice": t.cpu_alice,
                 "cpu_s_bob": t.cpu_bob,
@@ -263,18 +308,22 @@ def bench_design(size: int = 8, range_: int = 99, progress: bool = True) -> dict
 def format_design(result: dict[str, Any]) -> str:
     lines = [
         f"Design study: one {result['size']} x {result['size']} case, coordinates in "
-        f"+-{result['grid_range']} (l = {result['comparison_bits']}); one run per row.",
+        f"+-{result['grid_range']} (l = {result['comparison_bits']}); one run per row "
+        "(single runs, not medians).  The OT setup is made once per pair of drones.",
         "",
-        "| suite | OT block bits | digit bits | correct | total bytes | messages "
-        "| Alice CPU s | Bob CPU s |",
-        "|---|---:|---:|---|---:|---:|---:|---:|",
+        "| suite | OT block bits | kappa | digit bits | correct | run bytes | messages "
+        "| Alice CPU s | Bob CPU s | setup bytes | setup CPU s |",
+        "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in result["rows"]:
-        blocks = r["ot_block_bits"] or "-"
-        digits = r["digit_bits"] or "-"
+        paper = r["suite"] == "paper"
+        blocks, kappa, digits = (
+            ("-", "-", "-") if paper else (r["ot_block_bits"], r["ot_security"], r["digit_bits"])
+        )
+        setup = ("-", "-") if paper else (r["setup_bytes"], f"{r['setup_cpu_s']:.2f}")
         lines.append(
-            f"| {r['suite']} | {blocks} | {digits} | {'yes' if r['correct'] else 'NO'} "
+            f"| {r['suite']} | {blocks} | {kappa} | {digits} | {'yes' if r['correct'] else 'NO'} "
             f"| {r['bytes_total']} | {r['messages']} | {r['cpu_s_alice']:.2f} "
-            f"| {r['cpu_s_bob']:.2f} |"
+            f"| {r['cpu_s_bob']:.2f} | {setup[0]} | {setup[1]} |"
         )
     return "\n".join(lines)

@@ -21,8 +21,14 @@ from .geometry import Point, path_hits
 from .grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
 from .intersection import Alice, Bob, BobKeys, Limits
 from .loopback import run_ot_setup, run_paths
-from .ot.setup import DEFAULT_BLOCK_BITS, ChooserSetup, HolderSetup
-from .suite_compact import blocks_of
+from .ot.setup import (
+    DEFAULT_BLOCK_BITS,
+    DEFAULT_SECURITY,
+    ChooserSetup,
+    HolderSetup,
+    describe,
+    split_blocks,
+)
 from .wire import Suite
 
 SUITES = {"compact": Suite.COMPACT, "paper": Suite.PAPER}
@@ -110,12 +116,18 @@ class Party:
     once: dict[str, float]  # one-time costs: CPU seconds and bytes
 
     @classmethod
-    def generate(cls, suite: Suite, *, block_bits: int = DEFAULT_BLOCK_BITS) -> Party:
+    def generate(
+        cls,
+        suite: Suite,
+        *,
+        block_bits: int = DEFAULT_BLOCK_BITS,
+        ot_security: int = DEFAULT_SECURITY,
+    ) -> Party:
         if suite is Suite.PAPER:
             start = time.process_time()
             keys = BobKeys.generate()
             return cls(suite, keys, None, {}, {"bob_keygen_s": time.process_time() - start})
-        chooser, setup, t = run_ot_setup(blocks_of(block_bits))
+        chooser, setup, t = run_ot_setup(split_blocks(block_bits, ot_security))
         once = {
             "setup_cpu_s_alice": t.cpu_alice,
             "setup_cpu_s_bob": t.cpu_bob,
@@ -155,7 +167,8 @@ def params_of(party: Party, grid: GridSpec, kappa: int = 40) -> dict[str, Any]:
             "kappa": kappa,
             **common,
         }
-    return {"scheme": "OT extension (SoftSpokenOT, 128-bit Delta)", **common}
+    assert party.setup is not None
+    return {"scheme": f"OT extension ({describe(party.setup.blocks)})", **common}
 
 
 def compare(
@@ -185,7 +198,7 @@ def describe_once(params: dict[str, Any]) -> str:
         return f"Bob's keys, {1e3 * once['bob_keygen_s']:.0f} ms CPU"
     size = once["setup_bytes_alice_to_bob"] + once["setup_bytes_bob_to_alice"]
     cpu = once["setup_cpu_s_alice"] + once["setup_cpu_s_bob"]
-    return f"OT setup, {size} B on the radio and {1e3 * cpu:.0f} ms CPU (not in the rows)"
+    return f"OT setup, {size} B on the radio and {1e3 * cpu:.0f} ms CPU (not in the per-run rows)"
 
 
 def format_compare(result: dict[str, Any]) -> str:

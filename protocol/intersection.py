@@ -34,7 +34,7 @@ from .dgk import DGKPrivateKey
 from .errors import InputRangeError, LocalProtocolError, ProtocolError, RemoteProtocolError
 from .geometry import Point, clip_to_box
 from .grid import GridKind, GridSpec
-from .ot.setup import DEFAULT_BLOCK_BITS, ChooserSetup, HolderSetup
+from .ot.setup import DEFAULT_BLOCK_BITS, DEFAULT_SECURITY, ChooserSetup, HolderSetup
 from .paillier import PaillierPrivateKey
 from .pathcircuit import Orient, Proj, path_hits
 from .wire import Hello, Suite
@@ -226,6 +226,7 @@ class Alice:
         horizon_m: int = 0,
         digit_bits: int | None = None,
         block_bits: int = DEFAULT_BLOCK_BITS,
+        ot_security: int = DEFAULT_SECURITY,
         insecure_for_tests: bool = False,
     ) -> None:
         if len(path) < 2:
@@ -244,6 +245,7 @@ class Alice:
                 horizon_m=horizon_m,
                 digit_bits=digit_bits,
                 block_bits=block_bits,
+                ot_security=ot_security,
             )
         else:
             from .suite_paper import PaperAlice

@@ -3,8 +3,8 @@
 Messages (step numbers in the frame header), with w-bit digits and D AND levels:
 
 ====  =========  =====================================================================
- 1    A -> B     HELLO: grid, m, horizon, nonce; the cached setup's id, or 128 base-OT
-                 points for a fresh setup (:mod:`protocol.ot.setup`)
+ 1    A -> B     HELLO: grid, m, horizon, nonce; the cached setup's id, or kappa (112)
+                 base-OT points for a fresh setup (:mod:`protocol.ot.setup`)
  2    B -> A     OFFER: n, nonce; (fresh setup: A and the GGM corrections); the run's OT
                  extension (15 bits per OT); Bob's value bits XOR his choice bits
  3    A -> B     PRODUCTS: every compared value as shares mod 2^(l+1) (:mod:`.products`)
@@ -31,6 +31,7 @@ and Z = EQ = [v = 0].  Projections use theta = 0 (L = not [t >= 0]) and theta = 
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import secrets
 from collections.abc import MutableMapping, Sequence
@@ -61,14 +62,17 @@ from .ot.extension import (
 )
 from .ot.setup import (
     DEFAULT_BLOCK_BITS,
+    DEFAULT_SECURITY,
+    MAX_BLOCK_BITS,
+    SECURITY_LEVELS,
     SETUP_ID_SIZE,
     ChooserSetup,
     HolderSetup,
     HolderSetupStart,
-    check_blocks,
     chooser_message_size,
     chooser_setup,
     holder_message_size,
+    split_blocks,
 )
 from .pathcircuit import Orient, Proj
 from .products import ProductsAlice, ProductsBob
@@ -87,14 +91,19 @@ class Offer:
 
     digit_bits: int
     setup_id: bytes | None  # a cached setup
-    block_bits: int = DEFAULT_BLOCK_BITS  # fresh setup: bits per block of Delta
+    block_bits: int = DEFAULT_BLOCK_BITS  # fresh setup: at most this many bits per block
+    security: int = DEFAULT_SECURITY  # fresh setup: kappa, the bits of Delta
     points: bytes = b""  # fresh setup: the base-OT receiver message
+
+    @property
+    def blocks(self) -> tuple[int, ...]:
+        return split_blocks(self.block_bits, self.security)
 
     def to_bytes(self) -> bytes:
         head = bytes([self.digit_bits])
         if self.setup_id is not None:
             return head + bytes([CACHED]) + self.setup_id
-        return head + bytes([FRESH, self.block_bits]) + self.points
+        return head + bytes([FRESH, self.block_bits, self.security]) + self.points
 
     @classmethod
     def from_bytes(cls, data: bytes) -> Offer:
@@ -106,21 +115,17 @@ class Offer:
         if mode == CACHED:
             offer = cls(digit_bits, reader.take(SETUP_ID_SIZE))
         elif mode == FRESH:
-            block_bits = reader.uint(1)
-            blocks_of(block_bits)
-            offer = cls(digit_bits, None, block_bits, reader.take(holder_message_size()))
+            block_bits, security = reader.uint(1), reader.uint(1)
+            if security not in SECURITY_LEVELS or not 1 <= block_bits <= MAX_BLOCK_BITS:
+                raise RemoteProtocolError(
+                    f"OT setup with {security}-bit Delta in {block_bits}-bit blocks"
+                )
+            points = reader.take(holder_message_size(security))
+            offer = cls(digit_bits, None, block_bits, security, points)
         else:
             raise RemoteProtocolError(f"unknown OT setup mode {mode}")
         reader.finish()
         return offer
-
-
-def blocks_of(block_bits: int) -> tuple[int, ...]:
-    """128 bits of Delta in blocks of ``block_bits`` (the last one takes the rest)."""
-    if not 1 <= block_bits <= 12:
-        raise RemoteProtocolError(f"OT blocks of {block_bits} bits are not supported")
-    blocks = (block_bits,) * (128 // block_bits) + ((128 % block_bits,) if 128 % block_bits else ())
-    return check_blocks(blocks)
 
 
 # --------------------------------------------------------------------------- the plan
@@ -219,6 +224,7 @@ class CompactAlice(AliceSide):
         horizon_m: int = 0,
         digit_bits: int | None = None,
         block_bits: int = DEFAULT_BLOCK_BITS,
+        ot_security: int = DEFAULT_SECURITY,
     ) -> None:
         self.segments = len(path) - 1
         self.m = limits.padded(self.segments)
@@ -228,7 +234,8 @@ class CompactAlice(AliceSide):
         if not 1 <= self.digit_bits <= MAX_DIGIT_BITS:
             raise InputRangeError(f"digits of 1..{MAX_DIGIT_BITS} bits")
         self.setup = setup
-        self._fresh = HolderSetupStart(blocks_of(block_bits)) if setup is None else None
+        self._offer = Offer(self.digit_bits, None, block_bits, ot_security)
+        self._fresh = HolderSetupStart(self._offer.blocks) if setup is None else None
         self.nonce = secrets.token_bytes(NONCE_SIZE)
         self.state = State.START
         self.step = 2
@@ -241,7 +248,7 @@ class CompactAlice(AliceSide):
             offer = Offer(self.digit_bits, self.setup.setup_id)
         else:
             assert self._fresh is not None
-            offer = Offer(self.digit_bits, None, self._fresh.blocks[0], self._fresh.message())
+            offer = dataclasses.replace(self._offer, points=self._fresh.message())
         hello = Hello(
             Suite.COMPACT, 0, self.grid, self.m, self.horizon_m, self.nonce, offer.to_bytes()
         )
@@ -374,7 +381,7 @@ class CompactBob(BobSide):
                 raise RemoteProtocolError("unknown OT setup (start a fresh one)")
             self.setup = found
         else:
-            self.setup, setup_reply = chooser_setup(offer.points, blocks_of(offer.block_bits))
+            self.setup, setup_reply = chooser_setup(offer.points, offer.blocks)
             setups[self.setup.setup_id] = self.setup
         nonce_b = secrets.token_bytes(NONCE_SIZE)
         nonce = _run_nonce(hello.nonce, nonce_b, self.setup.setup_id)
@@ -469,14 +476,16 @@ def message_sizes(
     digit_bits: int = DEFAULT_DIGIT_BITS,
     fresh_setup: bool = False,
     block_bits: int = DEFAULT_BLOCK_BITS,
+    ot_security: int = DEFAULT_SECURITY,
 ) -> list[tuple[bool, int]]:
     """(sent by Alice, frame bytes) of every message of an m x n run (padded sizes), computed
     from public values alone: what a run will cost on the radio before it starts."""
 
     plan = make_plan(m, n, grid, digit_bits)
-    blocks = blocks_of(block_bits)
+    fresh = Offer(digit_bits, None, block_bits, ot_security)
+    blocks = fresh.blocks
     offer = (
-        Offer(digit_bits, None, block_bits, bytes(holder_message_size()))
+        dataclasses.replace(fresh, points=bytes(holder_message_size(ot_security)))
         if fresh_setup
         else Offer(digit_bits, bytes(SETUP_ID_SIZE))
     )

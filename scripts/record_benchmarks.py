@@ -1,7 +1,7 @@
 """Re-run the benchmarks and rewrite their sections of docs/benchmarks.md.
 
-Usage: .venv/bin/python scripts/record_benchmarks.py [crypto] [paper] [paper-dgk] [scaling] [link]
-(default: all) [--repeat N]
+Usage: .venv/bin/python scripts/record_benchmarks.py [crypto] [paper] [paper-dgk] [scaling]
+[scaling-2000] [design] [link] [replays] (default: all) [--repeat N]
 
 Each section sits between markers ``<!-- bench NAME -->`` and ``<!-- /bench NAME -->``; the
 rest of the file is kept.  The new file is written next to the old one and renamed over it, so
@@ -11,17 +11,73 @@ an interrupted run leaves the old file intact.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
+import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
 from companion.over_link import bench_link, format_link
 from protocol.bench import bench_crypto, format_crypto
-from protocol.bench_paths import bench_paper, bench_scaling, format_paper, format_scaling
+from protocol.bench_paths import (
+    bench_design,
+    bench_paper,
+    bench_scaling,
+    format_design,
+    format_paper,
+    format_scaling,
+)
 
-DOC = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
+ROOT = Path(__file__).resolve().parent.parent
+DOC = ROOT / "docs" / "benchmarks.md"
+SCENARIOS = ROOT / "sitl_configs" / "scenarios"
+
+
+def replays() -> str:
+    """Every shipped scenario once (single runs): the replay report's figures."""
+    lines = [
+        "Replays: `python -m companion replay sitl_configs/scenarios/NAME.toml --json`, one run "
+        "each (single runs, not medians; simulated seconds).  Radio bytes: everything the "
+        "companions sent (beacons, protocol messages, link headers, ACKs and retransmissions), "
+        "all drones together.  First result: when the first run gave an Alice her answer "
+        "(simulated seconds from the start); closest approach of each conflicting pair without "
+        "and with the companion (t: when, with it).",
+        "",
+        "| scenario | link | conflicts resolved | precautionary | radio bytes | airtime "
+        "| first result | closest without -> with |",
+        "|---|---|---:|---:|---:|---:|---|---|",
+    ]
+    for path in sorted(SCENARIOS.glob("*.toml")):
+        print(f"  ... replay {path.stem}", file=sys.stderr, flush=True)
+        run = subprocess.run(  # noqa: S603 -- our own interpreter and scenario files
+            [sys.executable, "-m", "companion", "replay", str(path), "--json"],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        if run.returncode not in (0, 1):
+            lines.append(f"| {path.stem} | failed: {run.stderr.strip()[-200:]} |")
+            continue
+        r = json.loads(run.stdout)
+        results = [e["t"] for d in r["drones"] for e in d["timeline"] if e["kind"] == "result"]
+        meets = [
+            f"{p['closest_approach_baseline_m']:.1f} -> {p['closest_approach_m']:.1f} m"
+            + (f" (t = {p['closest_approach_t']:.0f} s)" if p.get("closest_approach_t") else "")
+            for p in r["pairs"]
+            if p["conflict"]
+        ]
+        link = r["link"]
+        lines.append(
+            f"| {r['scenario']} | {link['profile']}, {link['loss']:.0%} loss "
+            f"| {r['conflicts_resolved']}/{r['conflicts']} | {r['precautionary_actions']} "
+            f"| {sum(d['bytes_sent'] for d in r['drones'])} "
+            f"| {sum(d['airtime_s'] for d in r['drones']):.1f} s "
+            f"| {f'{min(results):.0f} s' if results else '-'} "
+            f"| {'; '.join(meets) or '-'} |"
+        )
+    return "\n".join(lines)
 
 
 def sections(repeat: int) -> dict[str, Callable[[], str]]:
@@ -30,7 +86,10 @@ def sections(repeat: int) -> dict[str, Callable[[], str]]:
         "paper": lambda: format_paper(bench_paper(suite="compact")),
         "paper-dgk": lambda: format_paper(bench_paper(suite="paper")),
         "scaling": lambda: format_scaling(bench_scaling()),
+        "scaling-2000": lambda: format_scaling(bench_scaling((8, 16), range_=2000)),
+        "design": lambda: format_design(bench_design()),
         "link": lambda: format_link(bench_link()),
+        "replays": replays,
     }
 
 

@@ -9,7 +9,7 @@ PRG, G_x = PRG(s_x, nonce), an M-bit string (M = number of OTs of the run):
 
 Bob's random choice bits are c = u_0 and he sends d_b = u_b xor c for b >= 1; Alice adds
 Delta_b . d_b.  Now every bit column satisfies w = v + Delta_bit . c, i.e. for each OT i the
-128-bit rows q_i (Alice) and t_i (Bob) satisfy q_i = t_i xor c_i Delta (IKNP's correlation).
+kappa-bit rows q_i (Alice) and t_i (Bob) satisfy q_i = t_i xor c_i Delta (IKNP's correlation).
 Hashing with a per-run, per-index tweak gives random OTs: Alice K_i^0 = H(i, q_i),
 K_i^1 = H(i, q_i xor Delta); Bob c_i and K_i^{c_i} = H(i, t_i).  Bob sends (blocks - 1) M bits.
 
@@ -69,7 +69,8 @@ def _mask_tail(vector: Bytes, count: int) -> Bytes:
 
 
 def _rows(columns: list[Bytes], count: int) -> Bytes:
-    """Transpose 128 column bit-vectors of ``count`` bits into ``count`` rows of 16 bytes."""
+    """Transpose kappa column bit-vectors of ``count`` bits into ``count`` rows of kappa / 8
+    bytes."""
     matrix = np.unpackbits(np.stack(columns), axis=1, bitorder="little")[:, :count]
     return np.packbits(np.ascontiguousarray(matrix.T), axis=1, bitorder="little")
 

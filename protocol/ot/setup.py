@@ -1,12 +1,14 @@
 """The one-time OT setup between two drones: base OTs, then punctured trees (cached per peer).
 
-The 128-bit secret Delta of the holder (Alice) is cut into blocks (default ten of 12 bits and
-one of 8, see :data:`DEFAULT_BLOCKS`); block b has a GGM tree of depth k_b whose punctured point is
-Delta_b.  128 base OTs (one per bit of Delta, :mod:`.base`) carry the tree levels.
+The secret Delta of the holder (Alice) has kappa bits (the computational security parameter
+of the OT extension: 112 by default, the project's level, as ABY's "medium term" setting; 128
+on request) and is cut into blocks of at most 12 bits (default for 112: two of 12 bits and
+eight of 11, see :data:`DEFAULT_BLOCKS`); block b has a GGM tree of depth k_b whose punctured
+point is Delta_b.  kappa base OTs (one per bit of Delta, :mod:`.base`) carry the tree levels.
 
 Messages (both ride on the path protocol's first two messages, so a setup costs no round trip):
 
-* holder -> chooser: the base-OT receiver points, 33 bytes x 128;
+* holder -> chooser: the base-OT receiver points, 33 bytes x kappa;
 * chooser -> holder: A (33 bytes), then the level corrections of every tree (32 bytes per level
   below the first).
 
@@ -27,24 +29,46 @@ from ..errors import LocalProtocolError, RemoteProtocolError
 from .base import BaseReceiver, BaseSender
 from .pprf import correction_size, expand_full, expand_punctured
 
-SECURITY = 128
+SECURITY_LEVELS = (112, 128)  # kappa: bits of Delta = base OTs
+DEFAULT_SECURITY = 112
 DEFAULT_BLOCK_BITS = 12  # chosen on measurements: ``python -m protocol bench design``
-DEFAULT_BLOCKS: tuple[int, ...] = (12,) * 10 + (8,)
 SETUP_ID_SIZE = 16
 MAX_BLOCK_BITS = 12
 
 
+def split_blocks(block_bits: int, security: int = DEFAULT_SECURITY) -> tuple[int, ...]:
+    """kappa bits of Delta in as few blocks of at most ``block_bits`` as possible, sizes as
+    even as possible (the work of a block grows as 2^k; its bytes do not depend on k)."""
+    if not 1 <= block_bits <= MAX_BLOCK_BITS:
+        raise LocalProtocolError(f"OT blocks of {block_bits} bits are not supported")
+    count = -(-security // block_bits)
+    size, extra = divmod(security, count)
+    return check_blocks((size + 1,) * extra + (size,) * (count - extra))
+
+
 def check_blocks(blocks: Sequence[int]) -> tuple[int, ...]:
     blocks = tuple(blocks)
-    if sum(blocks) != SECURITY or not all(1 <= k <= MAX_BLOCK_BITS for k in blocks):
+    if sum(blocks) not in SECURITY_LEVELS or not all(1 <= k <= MAX_BLOCK_BITS for k in blocks):
         raise LocalProtocolError(
-            f"blocks must be 1..{MAX_BLOCK_BITS} bits each and add up to {SECURITY}"
+            f"blocks must be 1..{MAX_BLOCK_BITS} bits each and add up to one of {SECURITY_LEVELS}"
         )
     return blocks
 
 
-def holder_message_size() -> int:
-    return SECURITY * ec.POINT_SIZE
+DEFAULT_BLOCKS = split_blocks(DEFAULT_BLOCK_BITS)
+
+
+def describe(blocks: Sequence[int]) -> str:
+    """E.g. "SoftSpokenOT, 112-bit Delta in 10 blocks (2 x 12 bits, 8 x 11)"."""
+    sizes = sorted(set(blocks), reverse=True)
+    parts = ", ".join(
+        f"{list(blocks).count(k)} x {k}" + (" bits" if i == 0 else "") for i, k in enumerate(sizes)
+    )
+    return f"SoftSpokenOT, {sum(blocks)}-bit Delta in {len(blocks)} blocks ({parts})"
+
+
+def holder_message_size(security: int = DEFAULT_SECURITY) -> int:
+    return security * ec.POINT_SIZE
 
 
 def chooser_message_size(blocks: Sequence[int]) -> int:
@@ -111,9 +135,9 @@ class HolderSetupStart:
 def chooser_setup(holder_message: bytes, blocks: Sequence[int]) -> tuple[ChooserSetup, bytes]:
     """Bob: his trees and the reply (A, corrections) from Alice's base-OT points."""
     blocks = check_blocks(blocks)
-    if len(holder_message) != holder_message_size():
+    if len(holder_message) != holder_message_size(sum(blocks)):
         raise RemoteProtocolError("OT setup message has the wrong size")
-    sender = BaseSender(holder_message, SECURITY)
+    sender = BaseSender(holder_message, sum(blocks))
     leaves = []
     corrections = []
     used = 0

@@ -9,7 +9,7 @@ import math
 import pytest
 
 from companion.beacon import Beacon, BeaconError
-from companion.failsafe import FailsafeSettings, run_seconds, too_late
+from companion.failsafe import FailsafeSettings, at_risk, run_seconds, too_late
 from companion.levels import assign, levels_mask
 from companion.link import PROFILES, Impairments
 from companion.link.airtime import DutyCycle
@@ -68,6 +68,30 @@ def test_cut_counts_from_the_drone() -> None:
     assert reached_within(path, 4, north(250), 100) == {4, 5}
     assert reached_within(path, 4, north(250), 10) == {4}
     assert segments_within(path, 4, north(1000), 150) == [6]
+
+
+def east(metres: float) -> tuple[int, int]:
+    return (LAT, LON + round(metres / (M_PER_E7_LAT * math.cos(math.radians(LAT / 1e7)))))
+
+
+def test_precaution_covers_what_both_can_reach_before_the_result() -> None:
+    """Northbound route 0-300-600-900 m, the drone at 250 m; a peer 250 m east of the 600 m
+    vertex; 10 s margin.  A result in 20 s: the peer can reach 300 m (segments 1 and 2), we
+    fly to 550 m (segments 0 and 1): only segment 1 needs the precaution."""
+    path = [north(0), north(300), north(600), north(900)]
+    peer = (north(600)[0], east(250)[1])
+    settings = FailsafeSettings(margin_s=10.0, reach_margin_m=0.0)
+    here = north(250)
+    assert at_risk(path, 0, here, 10.0, peer, 10.0, 20.0, settings) == [1]
+    # a result in 60 s: both reach everything
+    assert at_risk(path, 0, here, 10.0, peer, 10.0, 60.0, settings) == [0, 1, 2]
+    # a finished run decided segment 1: nothing left at risk
+    assert at_risk(path, 0, here, 10.0, peer, 10.0, 20.0, settings, {1}) == []
+    # further back and slow (the 5 m/s floor): we stay on segment 0, which the peer cannot
+    # reach in time
+    assert at_risk(path, 0, north(100), 2.0, peer, 10.0, 20.0, settings) == []
+    # a peer 3 km away: nothing at risk
+    assert at_risk(path, 0, here, 10.0, (LAT, east(3000)[1]), 10.0, 20.0, settings) == []
 
 
 def test_time_to_meet_worst_case_then_measured() -> None:

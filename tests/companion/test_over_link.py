@@ -57,12 +57,17 @@ def test_compare_table_and_bad_profile(tmp_path: Path) -> None:
 def test_bench_link_rows() -> None:
     result = bench_link(DEFAULT_DATA, ["ideal", "us915-sf9"], (0.0, 0.3), size=2, progress=False)
     rows = result["rows"]
-    assert len(rows) == 2 * 2 * 2
+    assert len(rows) == 2 * 2 * 3  # profiles x losses x (paper pair, first contact, 2x2)
     for row in rows:
         assert row["correct"] == row["runs"]
         assert row["frames_sent"] > 0 and row["airtime_s"] > 0
     paper = {(r["profile"], r["loss"]): r for r in rows if r["workload"] == "paper pair"}
     assert paper[("us915-sf9", 0.3)]["frames_sent"] > paper[("us915-sf9", 0.0)]["frames_sent"]
     assert paper[("us915-sf9", 0.0)]["frames_retransmitted"] == 0
+    first = {
+        (r["profile"], r["loss"]): r for r in rows if r["workload"] == "paper pair, first contact"
+    }
+    for key, row in first.items():  # the OT setup travels too
+        assert row["frames_sent"] > paper[key]["frames_sent"]
     table = format_link(result)
     assert "| us915-sf9 | 30% | paper pair | 30/30 |" in table

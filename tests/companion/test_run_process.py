@@ -20,7 +20,8 @@ from .missions import survey
 def test_config_file_and_flags(tmp_path: Path) -> None:
     path = tmp_path / "c.toml"
     path.write_text(
-        'node = 3\nautopilot = "udpin://0.0.0.0:14542"\n[link]\nprofile = "eu868-sf7"\n'
+        'node = 3\nautopilot = "udpin://0.0.0.0:14542"\not_security = 128\n'
+        '[link]\nprofile = "eu868-sf7"\n'
         "[offset]\noffset_m = 15\n[limits]\nmax_runs_per_peer = 2\n"
     )
     config = load_config(path, {"link.profile": "us915-sf9", "offset.max_altitude_m": 90})
@@ -28,6 +29,8 @@ def test_config_file_and_flags(tmp_path: Path) -> None:
     assert config.link.profile == "us915-sf9"  # the flag wins
     assert config.companion.offset.max_altitude_m == 90.0
     assert config.companion.max_runs_per_peer == 2
+    assert config.companion.ot_security == 128
+    assert load_config(None, {"node": 1}).companion.ot_security == 112  # the default
 
 
 @pytest.mark.parametrize(
@@ -39,6 +42,7 @@ def test_config_file_and_flags(tmp_path: Path) -> None:
         ("node = 1\n[offset]\noffset_m = -3\n", "offset"),
         ("node = 1\n[limits]\nmax_runs_per_peer = 'many'\n", "max_runs_per_peer"),
         ("node = 1\nlog_level = 'loud'\n", "log_level"),
+        ("node = 1\not_security = 80\n", "ot_security"),
         ("node = [", "c.toml"),
     ],
 )

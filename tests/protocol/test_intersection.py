@@ -169,13 +169,21 @@ def test_limits() -> None:
         Limits(max_segments=4).padded(5)
 
 
-def test_cached_setup_is_reused_and_unknown_setups_are_refused(ot_pair: Any) -> None:
-    fresh = Alice(((0, 0), (1, 1)), GRID)
+@pytest.mark.parametrize("kappa", [112, 128])
+def test_cached_setup_is_reused_and_unknown_setups_are_refused(ot_pair: Any, kappa: int) -> None:
+    fresh = Alice(((0, 0), (1, 1)), GRID, ot_security=kappa)
+    assert len(fresh.start()) > 33 * kappa  # kappa base-OT points
+    fresh = Alice(((0, 0), (1, 1)), GRID, ot_security=kappa)
     bob_setups: dict[bytes, Any] = {}
     run_paths(fresh, Bob(((0, 1), (1, 0)), setups=bob_setups))
+    assert fresh.hits == [True]
     assert fresh.setup is not None and list(bob_setups) == [fresh.setup.setup_id]
+    assert sum(fresh.setup.blocks) == kappa
     again = Alice(((0, 0), (1, 1)), GRID, setup=fresh.setup)
-    assert len(again.start()) < 200  # the setup id instead of 128 points
+    assert len(again.start()) < 200  # the setup id instead of the points
+    again = Alice(((0, 0), (1, 1)), GRID, setup=fresh.setup)
+    run_paths(again, Bob(((0, 1), (1, 0)), setups=bob_setups))
+    assert again.hits == [True]
     stranger = Alice(((0, 0), (1, 1)), GRID, setup=ot_pair.holder)
     bob = Bob(((0, 1), (1, 0)), setups=bob_setups)
     with pytest.raises(RemoteProtocolError, match="unknown OT setup"):

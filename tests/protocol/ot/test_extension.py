@@ -15,14 +15,27 @@ from protocol.ot.setup import (
     chooser_message_size,
     chooser_setup,
     holder_message_size,
+    split_blocks,
 )
 
 
-@pytest.mark.parametrize("blocks", [DEFAULT_BLOCKS, (4,) * 32, (12,) * 10 + (8,), (1,) * 128])
+def test_blocks_are_split_evenly() -> None:
+    assert DEFAULT_BLOCKS == (12, 12) + (11,) * 8  # kappa = 112, at most 12 bits a block
+    assert split_blocks(12, 128) == (12,) * 7 + (11,) * 4
+    assert split_blocks(8, 112) == (8,) * 14
+    for k in range(1, 13):
+        for kappa in (112, 128):
+            blocks = split_blocks(k, kappa)
+            assert sum(blocks) == kappa and max(blocks) == k and max(blocks) - min(blocks) <= 1
+
+
+@pytest.mark.parametrize(
+    "blocks", [DEFAULT_BLOCKS, (4,) * 28, (8,) * 14, (12,) * 10 + (8,), (1,) * 128, (1,) * 112]
+)
 @pytest.mark.parametrize("count", [1, 7, 8, 9, 1000])
 def test_random_ots(blocks: tuple[int, ...], count: int) -> None:
     start = HolderSetupStart(blocks)
-    assert len(start.message()) == holder_message_size()
+    assert len(start.message()) == holder_message_size(sum(blocks))
     chooser, reply = chooser_setup(start.message(), blocks)
     assert len(reply) == chooser_message_size(blocks)
     holder = start.finish(reply)
@@ -56,7 +69,11 @@ def test_strictness(ot_pair) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(LocalProtocolError):
         chooser_extend(ot_pair.chooser, b"short", 13)
     with pytest.raises(LocalProtocolError):
-        check_blocks((8,) * 15)
+        check_blocks((8,) * 15)  # 120 bits: neither 112 nor 128
+    with pytest.raises(LocalProtocolError):
+        check_blocks((13,) * 8 + (8,))  # blocks of more than 12 bits
+    with pytest.raises(RemoteProtocolError):  # points for 112 OTs, blocks for 128
+        chooser_setup(HolderSetupStart(DEFAULT_BLOCKS).message(), split_blocks(12, 128))
     with pytest.raises(RemoteProtocolError):
         chooser_setup(b"\x02" * 10, DEFAULT_BLOCKS)
 
