@@ -43,3 +43,18 @@ def assign(conflicts: Mapping[int, set[int]], masks: Mapping[int, int]) -> dict[
             level += 1
         out[segment] = level
     return out
+
+
+def plan_levels(
+    conflicts: Mapping[int, set[int]],
+    precautions: Mapping[int, set[int]],
+    masks: Mapping[int, int],
+) -> dict[int, int]:
+    """Segment -> level for the conflicts found and the precautions taken (peer -> segments):
+    a precaution is a conflict until its result is in, so its level too avoids what the
+    peers announce (two drones that climb for each other, or for a third, must not meet
+    one offset up)."""
+    merged = {peer: set(segments) for peer, segments in conflicts.items() if segments}
+    for peer, segments in precautions.items():
+        merged[peer] = merged.get(peer, set()) | segments
+    return assign(merged, masks)

@@ -13,6 +13,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from protocol.intersection import MAX_SEGMENTS, Limits
+
 from .beacon import Beacon
 from .mission import ground_offset
 
@@ -53,6 +55,23 @@ def cut_at(
         if horizon_m <= 0:
             break
     return out
+
+
+def near_cut(
+    path: Sequence[tuple[int, int]],
+    horizon_m: float,
+    position: tuple[int, int] | None = None,
+    *,
+    least: int = 2,
+) -> list[tuple[int, int]]:
+    """What a near run compares: :func:`cut_at`, at least ``least`` segments, and then as
+    many more as the padding makes free (runs are padded to a power of two, so 3 segments
+    cost what 4 do).  A near run that takes them may leave no full run to do, which under a
+    duty cycle is the difference between a result and a precaution."""
+    if horizon_m <= 0 or len(path) < 2:
+        return list(path)
+    segments = max(len(cut_at(path, horizon_m, position)) - 1, least)
+    return list(path[: Limits().padded(min(segments, MAX_SEGMENTS)) + 1])
 
 
 @dataclass

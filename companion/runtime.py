@@ -42,12 +42,12 @@ from .beacon import SIZE as BEACON_SIZE
 from .beacon import Beacon, BeaconError, alice_of
 from .exchange import run_alice, serve_bob
 from .failsafe import Action, FailsafeSettings, at_risk, run_seconds, too_late
-from .levels import assign, levels_mask
+from .levels import levels_mask, plan_levels
 from .link.arq import LinkError, PeerAborted
 from .link.endpoint import ABORT_PROTOCOL, ABORT_REFUSED, LinkEndpoint
 from .link.frames import OVERHEAD
 from .mission import MissionItem, path_of, point_as_segment, remaining, vertices
-from .peers import Peer, cut_at, distance_m, time_to_meet
+from .peers import Peer, distance_m, near_cut, time_to_meet
 from .planner import OffsetSettings, PlannerError, plan_offsets
 from .radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
 
@@ -57,6 +57,8 @@ UNKNOWN_SETUP = "unknown OT setup"
 SETUPS_PER_PEER = 2
 NEAR_SLACK_S = 30.0  # the near run reaches this far past the earliest possible meeting
 NEAR_SEGMENTS = 2  # and each side compares at least its next two segments
+BOB_GUESS = 4  # Bob's size before he tells it: a remaining route of a few legs (m x m would
+# stretch the horizon of a long route over everything; the run watch uses his real size)
 QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a full run
 
 
@@ -127,7 +129,7 @@ class Companion:
         self.mission: list[MissionItem] = []
         self.levels: dict[int, int] = {}  # segment -> altitude level, as uploaded
         self.flagged: set[int] = set()  # segments the comparisons found in conflict
-        self.precaution: dict[int, dict[int, int]] = {}  # peer -> segment -> level
+        self.precaution: dict[int, set[int]] = {}  # peer -> segments climbed as a precaution
         self.position: tuple[int, int, float] = (0, 0, 0.0)  # lat, lon degE7, alt AMSL
         self.relative_alt = 0.0
         self.speed_m_s = 0.0
@@ -434,7 +436,7 @@ class Companion:
         due = [p for p in self.peers.values() if self._should_compare(p, now)] or [peer]
         runs = sum(
             self._seconds(2, grid, fresh=p.node not in self.holder_setups)
-            + self._seconds(m, grid, fresh=False)
+            + self._seconds(m, grid, fresh=False, n=min(m, BOB_GUESS))
             for p in due
         )
         # Nothing can happen before the peer could be here (both at cruise speed at least);
@@ -484,7 +486,9 @@ class Companion:
             except ProtocolError as exc:
                 self.record("run_failed", peer=peer.node, phase=phase, error=str(exc))
                 return False
-            needed = self._estimate(alice, grid, fresh=setup is None)
+            # Bob's size is unknown until his first reply: act at once only if even the
+            # smallest Bob makes the result too late; the watch re-checks with his real size.
+            needed = self._seconds(alice.m, grid, fresh=setup is None, n=1)
             meet = self._urgency(peer)
             self.record(
                 "run_started",
@@ -497,7 +501,7 @@ class Companion:
             )
             if too_late(needed, meet, self.settings.failsafe):
                 await self._precaution(peer, start, path, needed, meet)
-            watchdog = asyncio.create_task(self._watch(peer, start, path, needed))
+            watchdog = asyncio.create_task(self._watch(peer, start, path, alice, grid, needed))
             self._sessions += 1
             try:
                 report = await run_alice(
@@ -542,19 +546,21 @@ class Companion:
             cpu_s=round(report.cpu_s, 3),
             run_s=round(report.wall_s, 1),
         )
-        if phase == "full" or covered >= set(self.precaution.get(peer.node, {})):
+        if phase == "full" or covered >= self.precaution.get(peer.node, set()):
             await self._release(peer)
         await self._replan(f"result of the {phase} run with {peer.node}")
         return True
 
-    def _estimate(self, alice: Alice, grid: GridSpec, *, fresh: bool) -> float:
-        return self._seconds(alice.m, grid, fresh=fresh)
-
-    def _seconds(self, m: int, grid: GridSpec, *, fresh: bool) -> float:
-        """Link seconds an m x m run will need (Bob's size taken as Alice's: it is unknown)."""
+    def _seconds(
+        self, m: int, grid: GridSpec, *, fresh: bool, n: int | None = None, skip: int = 0
+    ) -> float:
+        """Link seconds an m x n run (n unknown: Bob's size taken as Alice's) will need from
+        now, its first ``skip`` messages already exchanged."""
         if self.settings.suite is not Suite.COMPACT:
             return 0.0
-        sizes = message_sizes(m, m, grid, fresh_setup=fresh, ot_security=self.settings.ot_security)
+        sizes = message_sizes(
+            m, m if n is None else n, grid, fresh_setup=fresh, ot_security=self.settings.ot_security
+        )[skip:]
         return run_seconds(
             sizes,
             self.endpoint.profile,
@@ -564,13 +570,27 @@ class Companion:
         )
 
     async def _watch(
-        self, peer: Peer, start: int, path: list[tuple[int, int]], needed: float
+        self,
+        peer: Peer,
+        start: int,
+        path: list[tuple[int, int]],
+        alice: Alice,
+        grid: GridSpec,
+        needed: float,
     ) -> None:
-        """While a run is under way: act as soon as its result could come too late."""
-        began = self.clock.now()
+        """While a run is under way: act as soon as its result could come too late.  Until
+        Bob's first reply tells his size the estimate is that of the smallest Bob (Alice's
+        own size would cry wolf when Bob's path is short: runs are sized m x n); then it is
+        the rest of the real m x n run from that moment."""
+        deadline = self.clock.now() + needed
+        sized = False
         while True:
             await self.clock.sleep(2.0)
-            left = max(needed - (self.clock.now() - began), 2.0)
+            if not sized and alice.n is not None:
+                sized = True  # messages 1 and 2 (hello, offer) are behind us
+                rest = self._seconds(alice.m, grid, fresh=False, n=alice.n, skip=2)
+                deadline = self.clock.now() + rest
+            left = max(deadline - self.clock.now(), 2.0)
             if too_late(left, self._urgency(peer), self.settings.failsafe):
                 await self._precaution(peer, start, path, left, self._urgency(peer))
                 return
@@ -604,8 +624,7 @@ class Companion:
         if settings.action is Action.OFF:
             return
         if settings.action is Action.CLIMB:
-            level = assign({peer.node: set(risky)}, {peer.node: peer.beacon.levels})
-            self.precaution[peer.node] = level
+            self.precaution[peer.node] = set(risky)  # levels chosen with the conflicts
             await self._replan(f"precaution for {peer.node}")
         else:
             self._holding.add(peer.node)
@@ -640,11 +659,11 @@ class Companion:
     async def _replan(self, why: str) -> None:
         """Upload the altitude levels the conflicts and precautions call for, if they changed."""
         async with self._edit_lock:
-            masks = {node: p.beacon.levels for node, p in self.peers.items()}
-            levels = assign({n: p.conflicts for n, p in self.peers.items() if p.conflicts}, masks)
-            for extra in self.precaution.values():
-                for segment, level in extra.items():
-                    levels[segment] = max(levels.get(segment, 0), level)
+            levels = plan_levels(
+                {node: p.conflicts for node, p in self.peers.items()},
+                self.precaution,
+                {node: p.beacon.levels for node, p in self.peers.items()},
+            )
             if levels == self.levels:
                 return
             try:
@@ -663,7 +682,10 @@ class Companion:
             except AutopilotError as exc:
                 self.record("upload_failed", error=str(exc))
                 return
+            announce = levels_mask(levels) != levels_mask(self.levels)
             self.mission, self.levels = new, levels
+            if announce:  # peers choose their levels around ours: tell them now, not in
+                self._beacon_now.set()  # minutes (a duty-cycled beacon interval)
             self.flagged = {k for p in self.peers.values() for k in p.conflicts}
             self.record(
                 "uploaded",
@@ -682,13 +704,9 @@ class Companion:
             self._spawn(self._answer(peer, session))
 
     def _near(self, path: list[tuple[int, int]], horizon: int) -> list[tuple[int, int]]:
-        """The part of the remaining path a run with this horizon compares: up to the first
-        vertex ``horizon`` metres ahead, and at least our next NEAR_SEGMENTS segments (a
-        near run of fewer costs about the same: sizes are padded to powers of two)."""
-        if horizon <= 0:
-            return path
-        cut = cut_at(path, horizon, self._here())
-        return cut if len(cut) > NEAR_SEGMENTS else path[: NEAR_SEGMENTS + 1]
+        """The part of the remaining path a run with this horizon compares (a full run's
+        horizon is 0: all of it)."""
+        return near_cut(path, horizon, self._here(), least=NEAR_SEGMENTS)
 
     def _bob_path(self, hello: Hello) -> list[tuple[int, int]]:
         _, path = self._remaining_path()

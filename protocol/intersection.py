@@ -152,6 +152,7 @@ class AliceSide(Machine):
 
     m: int  # padded size
     segments: int  # real size
+    n: int | None = None  # Bob's padded size, once his first reply has told it
     _hits: list[bool]
 
     def start(self) -> bytes:
@@ -277,6 +278,11 @@ class Alice:
     @property
     def m(self) -> int:
         return self._impl.m
+
+    @property
+    def n(self) -> int | None:
+        """Bob's padded segment count (public, as ``m``), None until his first reply."""
+        return self._impl.n
 
     def start(self) -> bytes:
         return self._impl.start()

@@ -32,6 +32,7 @@ and Z = EQ = [v = 0].  Projections use theta = 0 (L = not [t >= 0]) and theta = 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import secrets
 from collections.abc import MutableMapping, Sequence
@@ -480,8 +481,22 @@ def message_sizes(
 ) -> list[tuple[bool, int]]:
     """(sent by Alice, frame bytes) of every message of an m x n run (padded sizes), computed
     from public values alone: what a run will cost on the radio before it starts."""
+    return list(_message_sizes(m, n, grid.range, digit_bits, fresh_setup, block_bits, ot_security))
 
-    plan = make_plan(m, n, grid, digit_bits)
+
+@functools.lru_cache(maxsize=128)
+def _message_sizes(
+    m: int,
+    n: int,
+    range_: int,
+    digit_bits: int,
+    fresh_setup: bool,
+    block_bits: int,
+    ot_security: int,
+) -> tuple[tuple[bool, int], ...]:
+    """message_sizes, cached: the plan (tens to hundreds of ms) depends on the sizes and the
+    grid's range only, and a companion asks for the same few again and again."""
+    plan = make_plan(m, n, GridSpec(range=range_), digit_bits)
     fresh = Offer(digit_bits, None, block_bits, ot_security)
     blocks = fresh.blocks
     offer = (
@@ -515,4 +530,4 @@ def message_sizes(
         (True, header + plan.leaves.table_size() + rounds_[0][1]),
     ]
     sizes += [(alice, header + size) for alice, size in rounds_[1:]]
-    return sizes
+    return tuple(sizes)

@@ -10,7 +10,7 @@ import pytest
 
 from companion.beacon import Beacon, BeaconError
 from companion.failsafe import FailsafeSettings, at_risk, run_seconds, too_late
-from companion.levels import assign, levels_mask
+from companion.levels import assign, levels_mask, plan_levels
 from companion.link import PROFILES, Impairments
 from companion.link.airtime import DutyCycle
 from companion.over_link import link_case
@@ -18,6 +18,7 @@ from companion.peers import (
     Peer,
     cut_at,
     distance_m,
+    near_cut,
     reached_within,
     segments_within,
     time_to_meet,
@@ -70,6 +71,17 @@ def test_cut_counts_from_the_drone() -> None:
     assert segments_within(path, 4, north(1000), 150) == [6]
 
 
+def test_near_cut_takes_what_the_padding_makes_free() -> None:
+    path = [north(300 * k) for k in range(10)]  # 9 segments
+    assert near_cut(path, 0) == path
+    assert near_cut(path, 100) == path[:3]  # at least two segments
+    assert near_cut(path, 650) == path[:5]  # three reached, padded to four
+    assert near_cut(path, 1300) == path[:9]  # five reached, padded to eight
+    assert near_cut(path, 5000) == path
+    assert near_cut(path[:4], 100) == path[:3]  # two segments pad to two
+    assert near_cut(path[:4], 650) == path[:4]  # four, but no more than there is
+
+
 def east(metres: float) -> tuple[int, int]:
     return (LAT, LON + round(metres / (M_PER_E7_LAT * math.cos(math.radians(LAT / 1e7)))))
 
@@ -117,6 +129,15 @@ def test_levels_avoid_what_peers_announce() -> None:
     assert assign({2: {1}, 3: {1}}, {2: 1 << 1}) == {1: 2}
     assert assign({2: {1}, 3: {3}}, {2: 0b0110, 3: 1 << 1}) == {1: 3, 3: 2}
     assert levels_mask({1: 1, 3: 2}) == 0b0110
+
+
+def test_precautions_take_levels_like_conflicts() -> None:
+    # Peer 2 flies level 1 (for a third drone): a precaution for 2 goes one level higher,
+    # as a conflict with 2 would, and merges with the conflicts found.
+    assert plan_levels({}, {2: {1, 2}}, {2: 1 << 1}) == {1: 2, 2: 2}
+    assert plan_levels({3: {0}}, {2: {1}}, {2: 1 << 1}) == {0: 1, 1: 2}
+    assert plan_levels({2: {0}}, {2: {0, 1}}, {}) == {0: 1, 1: 1}
+    assert plan_levels({2: set()}, {}, {2: 0xFF}) == {}
 
 
 def test_planner_levels() -> None:

@@ -94,6 +94,7 @@ def test_scenario(name: str, climbers: dict[int, int], conflicts: int) -> None:
         ("inflight_crossing", {1: 1}, 1),
         ("inflight_headon", {1: 1}, 1),
         ("inflight_eu868", {1: 1}, 1),
+        ("inflight_long", {1: 1}, 1),
         ("inflight_star", None, 3),
     ],
 )

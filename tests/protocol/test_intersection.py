@@ -255,8 +255,12 @@ def test_message_sizes_are_known_before_the_run(m: int, n: int, fresh: bool, ot_
     bob_path = tuple(((i * 11) % 40, i * 5) for i in range(n + 1))
     alice = Alice(alice_path, grid, setup=None if fresh else ot_pair.holder)
     bob = Bob(bob_path, setups={} if fresh else ot_pair.setups)
+    assert alice.n is None  # Bob's size: unknown until his first reply
     transcript = run_paths(alice, bob)
     padded = Limits()
+    assert alice.n == padded.padded(n)
     expected = message_sizes(padded.padded(m), padded.padded(n), grid, fresh_setup=fresh)
     assert [size for _, size in expected] == [size for _, size in transcript.sizes]
+    again = message_sizes(padded.padded(m), padded.padded(n), grid, fresh_setup=fresh)
+    assert again == expected and again is not expected  # cached, but the caller's own list
     assert [a for a, _ in expected] == [i % 2 == 0 for i in range(len(expected))]
