@@ -88,13 +88,19 @@ def at_risk(
     seconds: float,
     settings: FailsafeSettings,
     decided: set[int] | frozenset[int] = frozenset(),
+    *,
+    peer_age_s: float = 0.0,
 ) -> list[int]:
     """Segments (``first`` + k of ``path``) a precaution must cover if the result may take
     ``seconds`` more: those the peer could reach by then *and* we enter by then (each drone
     flying at least ``floor_m_s``, plus the margin); a segment we enter later hears the
-    result first, and ``decided`` ones (a finished run compared them) need nothing."""
+    result first, and ``decided`` ones (a finished run compared them) need nothing.  The
+    peer's position is ``peer_age_s`` old: it may have flown that long already."""
     window = seconds + settings.margin_s
-    reach = max(peer_speed_m_s, settings.floor_m_s) * window + settings.reach_margin_m
+    reach = (
+        max(peer_speed_m_s, settings.floor_m_s) * (window + max(peer_age_s, 0.0))
+        + settings.reach_margin_m
+    )
     ahead = max(own_speed_m_s, settings.floor_m_s) * window + settings.reach_margin_m
     ours = reached_within(path, first, here, ahead)
     return [k for k in segments_within(path, first, peer, reach) if k in ours and k not in decided]

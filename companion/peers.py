@@ -124,20 +124,29 @@ def time_to_meet(
     peer: Peer,
     *,
     floor_m_s: float,
+    peer_floor_m_s: float | None = None,
     now: float | None = None,
+    silent_after_s: float = 0.0,
 ) -> float:
     """Seconds until the two drones could meet.  With a fresh measurement (two beacons, the
     last one less than ``FRESH_S`` old; a turn shows within one interval) at the rate their
     distance shrinks, at least ``MIN_CLOSING_M_S``; otherwise flying straight at each other,
-    each at least ``floor_m_s``.  Infinite while they clearly fly apart."""
+    each at least ``floor_m_s`` (the peer ``peer_floor_m_s`` if given); a peer not heard
+    for more than ``silent_after_s`` (longer than beacons are ever deferred) already that
+    much closer for every second since (a peer that fell silent is not parked where it
+    was).  Infinite while they clearly fly apart."""
     fresh = peer.measured and (now is None or now - peer.heard_at <= FRESH_S)
     if fresh and peer.range_rate > SEPARATING_M_S:
         return math.inf
+    distance = distance_m(own, peer.position)
     if fresh:
         closing = max(-peer.range_rate, MIN_CLOSING_M_S)
     else:
-        closing = max(own_speed, floor_m_s) + max(peer.speed_m_s, floor_m_s)
-    return distance_m(own, peer.position) / closing
+        peer_speed = max(peer.speed_m_s, floor_m_s if peer_floor_m_s is None else peer_floor_m_s)
+        closing = max(own_speed, floor_m_s) + peer_speed
+        if now is not None and now - peer.heard_at > silent_after_s:
+            distance = max(distance - peer_speed * (now - peer.heard_at), 0.0)
+    return distance / closing
 
 
 def segments_within(

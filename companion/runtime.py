@@ -47,7 +47,7 @@ from .link.arq import LinkError, PeerAborted
 from .link.endpoint import ABORT_PROTOCOL, ABORT_REFUSED, LinkEndpoint
 from .link.frames import OVERHEAD
 from .mission import MissionItem, path_of, point_as_segment, remaining, vertices
-from .peers import Peer, distance_m, near_cut, time_to_meet
+from .peers import FRESH_S, Peer, distance_m, near_cut, time_to_meet
 from .planner import OffsetSettings, PlannerError, plan_offsets
 from .radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
 
@@ -144,6 +144,7 @@ class Companion:
         self._sessions = 0  # runs on the air (as Alice or Bob)
         self._answering = 0  # runs we answer as Bob
         self._holding: set[int] = set()  # peers we hold for
+        self._running: tuple[int, float] | None = None  # our run's peer, its expected end
         self.epoch = 0.0
 
     # ------------------------------------------------------------------ lifecycle
@@ -170,6 +171,7 @@ class Companion:
             asyncio.create_task(self._listen(), name="listen"),
             asyncio.create_task(self._serve(), name="serve"),
             asyncio.create_task(self._alice_loop(), name="alice"),
+            asyncio.create_task(self._guard(), name="guard"),
         ]
 
     def _spawn(self, work: Any) -> None:
@@ -307,18 +309,22 @@ class Companion:
                 self.chooser_setups.pop(src, None)
             levels_changed = peer.beacon.levels != beacon.levels
             peer.heard(beacon, now, self.position[:2])
-            if levels_changed and peer.conflicts:
+            if levels_changed and (peer.conflicts or src in self.precaution):
                 self._spawn(self._replan(f"peer {src} announced levels {beacon.levels:#04x}"))
             self._wake.set()
 
     def _should_compare(self, peer: Peer, now: float) -> bool:
+        return now >= peer.next_try and self._pending(peer)
+
+    def _pending(self, peer: Peer) -> bool:
+        """We are Alice for this peer, it is in range, and its paths are not compared yet."""
         me = (self.on_ground, self.settings.node)
         them = (peer.beacon.on_ground, peer.node)
         if peer.role == "bob":
             return False
         if peer.role is None and alice_of(me, them) != self.settings.node:
             return False
-        if self.settings.suite not in peer.beacon.suites or now < peer.next_try:
+        if self.settings.suite not in peer.beacon.suites:
             return False
         if self.position[:2] == (0, 0):
             return False
@@ -326,13 +332,35 @@ class Companion:
             return False
         return peer.compared != (peer.beacon.mission_version, self.version)
 
+    def _peer_speed(self, peer: Peer) -> float:
+        """The speed the fail-safe assumes for a peer: its measured speed, at least the
+        floor; an airborne peer not measured lately (heard too seldom, or silent since) may
+        fly at cruise speed whatever it did when last measured."""
+        floor = self.settings.failsafe.floor_m_s
+        if not peer.beacon.on_ground and (not peer.measured or self._silent_for(peer) > 0):
+            floor = max(floor, self.settings.cruise_m_s)
+        return max(peer.speed_m_s, floor)
+
+    @property
+    def _silence_s(self) -> float:
+        """How long a peer may go unheard in the normal course: beacons are deferred up to
+        three intervals while runs are on the air (and jittered), measurements age FRESH_S."""
+        return 4.0 * self.beacon_interval + FRESH_S
+
+    def _silent_for(self, peer: Peer) -> float:
+        """Seconds since the peer was last heard if it has fallen silent, else 0."""
+        age = self.clock.now() - peer.heard_at
+        return age if age > self._silence_s else 0.0
+
     def _urgency(self, peer: Peer) -> float:
         return time_to_meet(
             self.position[:2],
             self.speed_m_s,
             peer,
             floor_m_s=self.settings.failsafe.floor_m_s,
+            peer_floor_m_s=self._peer_speed(peer),
             now=self.clock.now(),
+            silent_after_s=self._silence_s,
         )
 
     async def _alice_loop(self) -> None:
@@ -523,6 +551,7 @@ class Companion:
                 return False
             finally:
                 self._sessions -= 1
+                self._running = None
                 watchdog.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await watchdog
@@ -581,8 +610,9 @@ class Companion:
         """While a run is under way: act as soon as its result could come too late.  Until
         Bob's first reply tells his size the estimate is that of the smallest Bob (Alice's
         own size would cry wolf when Bob's path is short: runs are sized m x n); then it is
-        the rest of the real m x n run from that moment."""
+        the rest of the real m x n run from that moment; past it, as long as the overrun."""
         deadline = self.clock.now() + needed
+        self._running = (peer.node, deadline)
         sized = False
         while True:
             await self.clock.sleep(2.0)
@@ -590,10 +620,41 @@ class Companion:
                 sized = True  # messages 1 and 2 (hello, offer) are behind us
                 rest = self._seconds(alice.m, grid, fresh=False, n=alice.n, skip=2)
                 deadline = self.clock.now() + rest
-            left = max(deadline - self.clock.now(), 2.0)
+                self._running = (peer.node, deadline)
+            # Overdue (losses, a silent peer): the estimate has failed; expect as long again
+            # as it has overrun, so the fail-safe does not wait for the last seconds.
+            left = max(abs(deadline - self.clock.now()), 2.0)
             if too_late(left, self._urgency(peer), self.settings.failsafe):
                 await self._precaution(peer, start, path, left, self._urgency(peer))
                 return
+
+    async def _guard(self) -> None:
+        """The fail-safe for peers still waiting for their run (one run at a time on the
+        radio, a retry after a failure): act when even the smallest run, started once ours
+        on the air ends, would bring the result too late.  The peer a run is under way with
+        has its own watch."""
+        while True:
+            await self.clock.sleep(2.0)
+            if self.on_ground or not self.peers:
+                continue
+            now = self.clock.now()
+            running, ends = self._running or (None, now)
+            for peer in list(self.peers.values()):
+                if peer.node == running or peer.node in self.precaution or not self._pending(peer):
+                    continue
+                start, path = self._remaining_path()
+                if len(path) < 2:
+                    break
+                first = self._near(path, 1)  # the least a run compares
+                needed = max(ends - now, 0.0) + self._seconds(
+                    Limits().padded(len(first) - 1),
+                    self._grid(first),
+                    fresh=peer.node not in self.holder_setups,
+                    n=1,
+                )
+                meet = self._urgency(peer)
+                if too_late(needed, meet, self.settings.failsafe):
+                    await self._precaution(peer, start, path, needed, meet, waiting=True)
 
     async def _precaution(
         self,
@@ -602,14 +663,16 @@ class Companion:
         path: list[tuple[int, int]],
         needed: float,
         meet: float,
+        *,
+        waiting: bool = False,
     ) -> None:
         settings = self.settings.failsafe
         if peer.node in self.precaution or peer.node in self._holding or self.on_ground:
             return  # (on the ground the drone waits for its comparisons anyway)
         speed = max(self.speed_m_s, self.settings.cruise_m_s)
         risky = at_risk(
-            path, start, self._here(), speed, peer.position, peer.speed_m_s, needed,
-            settings, peer.covered,
+            path, start, self._here(), speed, peer.position, self._peer_speed(peer), needed,
+            settings, peer.covered, peer_age_s=self._silent_for(peer),
         )  # fmt: skip
         if not risky:
             return
@@ -620,8 +683,10 @@ class Companion:
             segments=risky,
             needed_s=round(needed, 1),
             time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
+            waiting=waiting,  # no run under way with this peer yet (queued, or a retry)
         )
         if settings.action is Action.OFF:
+            self.precaution[peer.node] = set()  # reported once; nothing flies differently
             return
         if settings.action is Action.CLIMB:
             self.precaution[peer.node] = set(risky)  # levels chosen with the conflicts

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from pathlib import Path
 
 import pytest
 
@@ -13,6 +14,11 @@ from companion.failsafe import FailsafeSettings, at_risk, run_seconds, too_late
 from companion.levels import assign, levels_mask, plan_levels
 from companion.link import PROFILES, Impairments
 from companion.link.airtime import DutyCycle
+from companion.link.clock import Clock, run_simulated
+from companion.link.endpoint import LinkEndpoint
+from companion.link.medium import SimMedium
+from companion.mission import MissionItem, path_of
+from companion.missionfile import read_plan
 from companion.over_link import link_case
 from companion.peers import (
     Peer,
@@ -25,7 +31,7 @@ from companion.peers import (
 )
 from companion.planner import plan_offsets
 from companion.radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
-from companion.runtime import box_radius_m
+from companion.runtime import Companion, CompanionSettings, box_radius_m
 from protocol.compare import Case, Party
 from protocol.grid import GridKind, GridSpec
 from protocol.suite_compact import message_sizes
@@ -34,6 +40,8 @@ from protocol.wire import Suite
 from .missions import survey
 
 LAT, LON = 473_977_420, 85_455_940
+C_LAT, C_LON = 474_000_000, 85_450_000  # the in-flight scenarios' crossing point
+SCENARIOS = Path(__file__).resolve().parents[2] / "sitl_configs" / "scenarios"
 M_PER_E7_LAT = 0.0111195  # metres per degE7 of latitude
 
 
@@ -104,6 +112,9 @@ def test_precaution_covers_what_both_can_reach_before_the_result() -> None:
     assert at_risk(path, 0, north(100), 2.0, peer, 10.0, 20.0, settings) == []
     # a peer 3 km away: nothing at risk
     assert at_risk(path, 0, here, 10.0, (LAT, east(3000)[1]), 10.0, 20.0, settings) == []
+    # ... unless it was heard there 300 s ago: it may be anywhere within 3 km by now
+    far = (LAT, east(3000)[1])
+    assert at_risk(path, 0, here, 10.0, far, 10.0, 20.0, settings, peer_age_s=300.0) == [0, 1]
 
 
 def test_time_to_meet_worst_case_then_measured() -> None:
@@ -120,8 +131,20 @@ def test_time_to_meet_worst_case_then_measured() -> None:
     )
     peer.heard(beacon(north(1000)), 30.0, north(0))  # flying apart now
     assert time_to_meet(north(0), 0.0, peer, floor_m_s=5.0, now=30.0) == math.inf
-    # a stale measurement falls back to the worst case
-    assert time_to_meet(north(0), 10.0, peer, floor_m_s=5.0, now=60.0) < 100.0
+    # a stale measurement falls back to the worst case: 1000 m at 10 m/s + the peer's speed,
+    # less what the silent peer may have flown since it was last heard (30 s)
+    v = max(peer.speed_m_s, 5.0)
+    assert time_to_meet(north(0), 10.0, peer, floor_m_s=5.0, now=60.0) == pytest.approx(
+        (1000 - 30 * v) / (10 + v), rel=0.02
+    )
+    peer.speed_m_s = 0.0  # last seen hovering: the floors decide
+    assert time_to_meet(north(0), 10.0, peer, floor_m_s=5.0, now=60.0) == pytest.approx(
+        (1000 - 150) / 15, rel=0.02
+    )
+    assert time_to_meet(
+        north(0), 10.0, peer, floor_m_s=5.0, peer_floor_m_s=10.0, now=60.0
+    ) == pytest.approx((1000 - 300) / 20, rel=0.02)
+    assert time_to_meet(north(0), 10.0, peer, floor_m_s=5.0, now=500.0) == 0.0
 
 
 def test_levels_avoid_what_peers_announce() -> None:
@@ -211,3 +234,55 @@ def test_profiles() -> None:
     g3 = PROFILES["eu868-g3-sf7"]
     assert g3.duty_cycle == 0.10 and g3.budget_s == pytest.approx(360.0)
     assert distance_m(north(0), north(1000)) == pytest.approx(1000.0, rel=0.001)
+
+
+class _Autopilot:
+    """Just enough of :class:`companion.autopilot.Autopilot` for an edit."""
+
+    def __init__(self, mission: list[MissionItem]) -> None:
+        self.mission = mission
+        self.uploads: list[list[MissionItem]] = []
+
+    async def download(self) -> list[MissionItem]:
+        return self.mission
+
+    async def replace_mission(self, new: list[MissionItem], held: list[MissionItem]) -> None:
+        self.uploads.append(new)
+        self.mission = new
+
+
+@pytest.mark.parametrize("busy_s", [0.0, 100.0])
+def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None:
+    """Drone 1 flies east towards the crossing at 0 m (425 m ahead); peer 2, 800 m south of
+    it, waits for its turn while the radio is busy with a run with peer 3 for ``busy_s``.
+    Idle, a first run with 2 could still end in time: nothing to do.  Busy for 100 s, even
+    the smallest run with 2 would be late: the guard climbs over the crossing leg for 2
+    without waiting for a run, and says so (``waiting``)."""
+    items, _ = read_plan(SCENARIOS / "inflight_east.plan")  # -600, -250, 250, 600 m east
+
+    async def main() -> tuple[Companion, _Autopilot]:
+        clock = Clock()
+        endpoint = LinkEndpoint(1, SimMedium(clock=clock).attach(1), PROFILES["us915-sf7"])
+        autopilot = _Autopilot(items)
+        c = Companion(CompanionSettings(node=1, autopilot_url=""), endpoint, autopilot)  # type: ignore[arg-type]
+        c.original = c.mission = list(items)
+        c.relative_alt, c.current_item, c.speed_m_s = 30.0, 2, 10.0  # airborne, segment 0
+        (lat, west), (_, east_) = path_of(items)[:2]  # -600 and -250 m: half-way, flying east
+        c.position = (lat, (west + east_) // 2, 518.0)
+        south = (C_LAT - round(800 / M_PER_E7_LAT), C_LON)
+        c.peers[2] = Peer(2, beacon(south), heard_at=clock.now())
+        c._running = (3, clock.now() + busy_s)
+        guard = asyncio.create_task(c._guard())
+        await clock.sleep(5.0)
+        guard.cancel()
+        return c, autopilot
+
+    companion, autopilot = run_simulated(main())
+    actions = [e for e in companion.events if e.kind == "precautionary"]
+    if not busy_s:
+        assert not actions and not autopilot.uploads
+        return
+    (event,) = actions
+    assert event.detail["waiting"] and event.detail["peer"] == 2
+    assert 1 in event.detail["segments"]  # the leg over the crossing
+    assert companion.levels.get(1) == 1 and autopilot.uploads  # climbed, one level

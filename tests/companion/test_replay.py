@@ -157,11 +157,16 @@ def test_fault_rejected_upload_keeps_the_old_mission() -> None:
 
 @pytest.mark.slow
 def test_fault_peer_vanishes_mid_run() -> None:
+    """Drone 2's companion vanishes while they compare (its drone flies on): drone 1's run
+    fails, no result ever comes.  Once airborne, drone 1 cannot know where the silent peer
+    is by now: with no run under way, the fail-safe's guard climbs over what it could reach."""
     scenario = _drone(_crossing(), 2, companion_stop_s=20.0)  # while they compare
     report = asyncio.run(run_replay(scenario)).report
     alice = report["drones"][0]
     assert any(f["kind"] == "run_failed" for f in alice["failures"])
-    assert not alice["edits"] and alice["vehicle_holds"] == "original"
+    assert not alice["runs"]  # no result
+    assert all(e["why"].startswith("precaution") for e in alice["edits"])
+    assert any(a["waiting"] for a in alice["precautionary"])
     assert report["finished"]  # the companion kept going and the missions were flown
 
 
@@ -200,6 +205,21 @@ def test_failsafe_climbs_when_the_result_cannot_arrive_in_time() -> None:
     assert pair["conflict"] and pair["acted"] and pair["resolved"]
     assert pair["closest_approach_m"] >= report["offset_m"] - RESOLVED_TOLERANCE_M
     assert not alice["runs"]  # no result: the precaution alone kept them apart
+
+
+@pytest.mark.slow
+def test_failsafe_acts_when_the_peer_falls_silent_mid_run() -> None:
+    """In flight, drone 2's companion vanishes during the first run: no result will come.
+    The overdue run and the silent peer (it may have flown on at cruise speed since it was
+    last heard) make drone 1 climb before the crossing."""
+    scenario = _drone(_in_flight("inflight_crossing", time_limit_s=120.0), 2, companion_stop_s=10.0)
+    report = asyncio.run(run_replay(scenario)).report
+    alice = report["drones"][0]
+    assert not alice["runs"], alice["timeline"]  # no result ever came
+    (action,) = alice["precautionary"] or [alice["timeline"]]
+    assert action["action"] == "climb" and 1 in action["segments"]  # the leg over the crossing
+    (pair,) = report["pairs"]
+    assert pair["conflict"] and pair["acted"] and pair["resolved"]
 
 
 @pytest.mark.slow
