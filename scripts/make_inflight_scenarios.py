@@ -60,6 +60,7 @@ if __name__ == "__main__":
     route("inflight_star_east", 90.0, [-1500, -500, 500, 1500])
     route("inflight_star_north", 0.0, [-1500, -600, 400, 1500])
     route("inflight_star_northeast", 45.0, [-1500, -400, 600, 1500])
-    # A long survey-like route (nine 200 m legs) crossed 900 m out: an m x n run of 16 x 4.
-    route("inflight_long_east", 90.0, [-900, -700, -500, -300, -100, 100, 300, 500, 700])
-    route("inflight_long_northwest", 300.0, [-900, -200, 200, 700])
+    # A long survey-like route (nine 200 m legs) crossed 1.1 km out: an m x n run of 16 x 4.
+    # (900 m out, a meeting after ~100 s, was marginal: one run in ~8 needed a precaution.)
+    route("inflight_long_east", 90.0, [-1100, -900, -700, -500, -300, -100, 100, 300, 500, 700])
+    route("inflight_long_northwest", 300.0, [-1100, -400, 200, 700])
