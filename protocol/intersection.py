@@ -59,6 +59,12 @@ class Limits:
             return segments
         return min(1 << (segments - 1).bit_length(), self.max_segments)
 
+    def peer_size(self, segments: int) -> int:
+        """The size the peer announces for its path, refused outside 1..max_segments."""
+        if not 1 <= segments <= self.max_segments:
+            raise RemoteProtocolError(f"peer's path has {segments} segments")
+        return segments
+
 
 def pad_path(path: Sequence[Point], segments: int) -> tuple[Point, ...]:
     """Repeat the last vertex: zero-length segments at an existing vertex change no answer."""

@@ -273,9 +273,7 @@ class CompactAlice(AliceSide):
     # message 2 -> 3
     def _on_offer(self, body: bytes) -> bytes:
         reader = Reader(body)
-        self.n = reader.uint(2)
-        if not 1 <= self.n <= self.limits.max_segments:
-            raise RemoteProtocolError(f"peer's path has {self.n} segments")
+        self.n = self.limits.peer_size(reader.uint(2))
         bob_nonce = reader.take(NONCE_SIZE)
         if self._fresh is not None:
             self.setup = self._fresh.finish(reader.take(chooser_message_size(self._fresh.blocks)))

@@ -202,9 +202,7 @@ class PaperAlice(AliceSide):
     # message 2 -> 3
     def _on_keys(self, body: bytes) -> bytes:
         reader = Reader(body)
-        self.n = reader.uint(2)
-        if not 1 <= self.n <= self.limits.max_segments:
-            raise RemoteProtocolError(f"peer's path has {self.n} segments")
+        self.n = self.limits.peer_size(reader.uint(2))
         paillier_key = take_blob(reader)
         if len(paillier_key) > MAX_MODULUS_BITS // 8:
             raise RemoteProtocolError("peer's Paillier modulus is larger than 4096 bits")
