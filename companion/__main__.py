@@ -1,12 +1,16 @@
-"""Command line: ``python -m companion {run, replay, link-hub, mock-autopilot, mission show}``."""
+"""Command line: ``python -m companion {run, replay, compare, bench-link, radio-demo, link-hub,
+mock-autopilot, mission show}``."""
 
 from __future__ import annotations
 
 import argparse
 import asyncio
 import contextlib
+import json
 import signal
 import sys
+
+from protocol.errors import ProtocolError
 
 from .link import Channel, Clock, Impairments
 from .link.udp import UdpHub
@@ -190,6 +194,46 @@ def _replay(args: argparse.Namespace) -> int:
     return 0 if ok and report["false_alarms"] == 0 else 1
 
 
+def _compare(args: argparse.Namespace) -> int:
+    """The protocol's comparison over the simulated radio (the radio is the companion's)."""
+    from protocol.compare import format_compare
+
+    from .link import profile
+    from .over_link import compare_over_link
+
+    link = profile(args.link)
+    if args.mtu is not None:
+        link = link.with_mtu(args.mtu)
+    result = compare_over_link(
+        args.alice,
+        args.bob,
+        args.suite,
+        link,
+        Impairments(loss=args.loss, corrupt=args.corrupt),
+        args.seed,
+        range_=args.range,
+        progress=not args.json,
+    )
+    print(json.dumps(result, indent=2) if args.json else format_compare(result))
+    return 0 if all(c["hits"] == c["plain_hits"] for c in result["cases"]) else 1
+
+
+def _bench_link(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from protocol.bench_paths import DEFAULT_DATA
+
+    from .over_link import bench_link, format_link
+
+    data = Path(args.data) if args.data else DEFAULT_DATA
+    profiles = args.profiles.split(",") if args.profiles else None
+    result = bench_link(
+        data, profiles, suite=args.suite, range_=args.range, progress=not args.quiet
+    )
+    print(json.dumps(result, indent=2) if args.json else format_link(result))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m companion", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -227,6 +271,33 @@ def main(argv: list[str] | None = None) -> int:
     show.add_argument("file")
     show.add_argument("--ardupilot", action="store_true", help="item 0 is home")
 
+    compare = sub.add_parser("compare", help="the encrypted path comparison over the radio link")
+    compare.add_argument("alice", help="Alice's paths: paper format (x,y)(x,y)... or .plan")
+    compare.add_argument("bob", help="Bob's paths, same format as Alice's")
+    compare.add_argument(
+        "--link",
+        metavar="PROFILE",
+        required=True,
+        help="eu868-sf7, eu868-sf9, eu868-sf12, eu868-g3-sf7, us915-sf7, us915-sf9 or ideal",
+    )
+    compare.add_argument("--suite", choices=["compact", "paper"], default="compact")
+    compare.add_argument("--range", type=int, default=None, help="public grid range R")
+    compare.add_argument("--loss", type=float, default=0.0, help="frame loss probability")
+    compare.add_argument("--corrupt", type=float, default=0.0, help="frame corruption probability")
+    compare.add_argument("--seed", type=int, default=None, help="channel seed")
+    compare.add_argument("--mtu", type=int, default=None, help="radio frame size, 32..255 bytes")
+    compare.add_argument("--json", action="store_true", help="machine-readable output")
+
+    bench = sub.add_parser("bench-link", help="the paper's pairs and an 8x8 run over each profile")
+    bench.add_argument("--data", help="directory with the paper's data")
+    bench.add_argument("--profiles", help="comma-separated link profiles (default all)")
+    bench.add_argument("--suite", choices=["compact", "paper"], default="compact")
+    bench.add_argument("--range", type=int, default=99, help="coordinate range of the 8x8 run")
+    bench.add_argument("--json", action="store_true", help="machine-readable output")
+    bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+
+    sub.add_parser("radio-demo", help="the demo's comparison over simulated LoRa profiles")
+
     replay = sub.add_parser("replay", help="fly a scenario: mock autopilots, MAVSDK, companions")
     replay.add_argument("scenario", help="scenario TOML (see sitl_configs/scenarios/)")
     replay.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -257,12 +328,20 @@ def main(argv: list[str] | None = None) -> int:
                 return 1
         if args.command == "replay":
             return _replay(args)
+        if args.command == "compare":
+            return _compare(args)
+        if args.command == "bench-link":
+            return _bench_link(args)
+        if args.command == "radio-demo":
+            from .over_link import radio_demo
+
+            return radio_demo()
         if args.command == "link-hub":
             return asyncio.run(_hub(args))
         if args.command == "mock-autopilot":
             return asyncio.run(_mock(args))
         return _mission_show(args)
-    except (ValueError, OSError) as exc:  # MissionError is a ValueError
+    except (ValueError, OSError, ProtocolError) as exc:  # MissionError is a ValueError
         print(f"error: {exc}", file=sys.stderr)
         return 2
 

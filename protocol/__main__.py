@@ -13,44 +13,13 @@ from .errors import ProtocolError
 def _demo(_args: argparse.Namespace) -> int:
     from .demo import run_demo
 
-    code = run_demo()
-    if code == 0:
-        from companion.over_link import radio_demo  # the radio is the companion's (I/O) side
-
-        code = radio_demo()
-    return code
+    return run_demo()
 
 
 def _compare(args: argparse.Namespace) -> int:
     from .compare import compare, format_compare
 
-    if args.link is not None:
-        # The radio is the companion's business (I/O); the protocol package stays pure.
-        from companion.link import Impairments, profile
-        from companion.over_link import compare_over_link
-
-        try:
-            link = profile(args.link)
-            if args.mtu is not None:
-                link = link.with_mtu(args.mtu)
-            impairments = Impairments(loss=args.loss, corrupt=args.corrupt)
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        result = compare_over_link(
-            args.alice,
-            args.bob,
-            args.suite,
-            link,
-            impairments,
-            args.seed,
-            range_=args.range,
-            progress=not args.json,
-        )
-    else:
-        result = compare(
-            args.alice, args.bob, args.suite, range_=args.range, progress=not args.json
-        )
+    result = compare(args.alice, args.bob, args.suite, range_=args.range, progress=not args.json)
     print(json.dumps(result, indent=2) if args.json else format_compare(result))
     return 0 if all(c["hits"] == c["plain_hits"] for c in result["cases"]) else 1
 
@@ -74,17 +43,6 @@ def _bench(args: argparse.Namespace) -> int:
 
         result = bench_crypto(repeat=args.repeat or 15, progress=not args.quiet)
         text = format_crypto(result)
-    elif args.what == "link":
-        from companion.over_link import bench_link, format_link
-
-        from .bench_paths import DEFAULT_DATA
-
-        data = Path(args.data) if args.data else DEFAULT_DATA
-        profiles = args.profiles.split(",") if args.profiles else None
-        result = bench_link(
-            data, profiles, suite=args.suite, range_=args.range or 99, progress=not args.quiet
-        )
-        text = format_link(result)
     elif args.what == "paper":
         from .bench_paths import DEFAULT_DATA, bench_paper, format_paper
 
@@ -122,28 +80,12 @@ def main(argv: list[str] | None = None) -> int:
     compare.add_argument("--suite", choices=["compact", "paper"], default="compact")
     compare.add_argument("--range", type=int, default=None, help="public grid range R")
     compare.add_argument("--json", action="store_true", help="machine-readable output")
-    compare.add_argument(
-        "--link",
-        metavar="PROFILE",
-        default=None,
-        help="run through the simulated radio: eu868-sf7, eu868-sf9, eu868-sf12, eu868-g3-sf7, "
-        "us915-sf7, "
-        "us915-sf9 or ideal",
-    )
-    compare.add_argument("--loss", type=float, default=0.0, help="frame loss probability (--link)")
-    compare.add_argument(
-        "--corrupt", type=float, default=0.0, help="frame corruption probability (--link)"
-    )
-    compare.add_argument("--seed", type=int, default=None, help="channel seed (--link)")
-    compare.add_argument(
-        "--mtu", type=int, default=None, help="radio frame size in bytes, 32..255 (--link)"
-    )
     compare.set_defaults(func=_compare)
 
     bench = sub.add_parser("bench", help="benchmarks that print tables")
     bench.add_argument(
         "what",
-        choices=["crypto", "paper", "scaling", "design", "link"],
+        choices=["crypto", "paper", "scaling", "design"],
         help="what to measure",
     )
     bench.add_argument("--suite", choices=["compact", "paper"], default="compact")
@@ -155,7 +97,6 @@ def main(argv: list[str] | None = None) -> int:
         "(design; default 8)",
     )
     bench.add_argument("--range", type=int, default=None, help="coordinate range (scaling)")
-    bench.add_argument("--profiles", help="comma-separated link profiles (link; default all)")
     bench.add_argument("--json", action="store_true", help="machine-readable output")
     bench.add_argument(
         "--repeat", type=int, default=None, help="runs per median (crypto: 15, scaling: 3)"

@@ -25,9 +25,9 @@ from .loopback import run_paths
 from .ot.setup import DEFAULT_SECURITY
 from .wire import Suite
 
-DEFAULT_DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "anchor-data"
+DEFAULT_DATA = Path(__file__).resolve().parent / "data" / "anchor"  # the paper's, verbatim (MIT)
 
-# The paper's published figures and its code as measured here (../shared/notes/field-notes.md).
+# The paper's published figures and its code as measured here (quoted from the field notes).
 PAPER_PUBLISHED = {"time_s": 4.407, "bytes": 4634, "note": "bytes are JVM object sizes"}
 PAPER_CODE_MEASURED = {
     "time_s": 4.1,

@@ -1,15 +1,22 @@
-"""``python -m protocol compare --link`` and ``bench link`` as a user runs them."""
+"""``python -m companion compare --link`` and ``bench-link`` as a user runs them."""
 
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from companion.over_link import bench_link, format_link
+from protocol.bench_paths import DEFAULT_DATA
 
-from ..protocol.test_cli import run_cli
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "companion", *args], capture_output=True, text=True, timeout=300
+    )
 
 
 def test_compare_over_a_lossy_link_json(tmp_path: Path) -> None:
@@ -39,6 +46,12 @@ def test_compare_over_a_lossy_link_json(tmp_path: Path) -> None:
         assert case["wall_s_simulated"] > case["airtime_s"]
 
 
+def test_radio_demo() -> None:
+    result = run_cli("radio-demo")
+    assert result.returncode == 0, result.stderr
+    assert "| us915-sf7 | True |" in result.stdout and "| eu868-sf7 | True |" in result.stdout
+
+
 def test_compare_table_and_bad_profile(tmp_path: Path) -> None:
     alice, bob = tmp_path / "alice.txt", tmp_path / "bob.txt"
     alice.write_text("(0,0)(10,10)\n")
@@ -52,23 +65,9 @@ def test_compare_table_and_bad_profile(tmp_path: Path) -> None:
     assert worse.returncode == 2 and "outside [0, 1)" in worse.stderr
 
 
-def _paper_like_data(directory: Path) -> Path:
-    """30 single-segment pairs in the paper's file format (a plain clone has no ../shared)."""
-    alices, bobs = [], []
-    for k in range(30):
-        a = ((37 * k + 11) % 199 - 99, (53 * k + 7) % 199 - 99)
-        b = ((29 * k + 5) % 199 - 99, (61 * k + 3) % 199 - 99)
-        alices.append(f"({a[0]},{a[1]})({-a[1]},{a[0]})")
-        bobs.append(f"({b[0]},{-b[1]})({-b[0]},{b[1]})")
-    (directory / "alices_segments.txt").write_text("\n".join(alices) + "\n")
-    (directory / "bobs_segments.txt").write_text("\n".join(bobs) + "\n")
-    return directory
-
-
 @pytest.mark.slow
-def test_bench_link_rows(tmp_path: Path) -> None:
-    data = _paper_like_data(tmp_path)
-    result = bench_link(data, ["ideal", "us915-sf9"], (0.0, 0.3), size=2, progress=False)
+def test_bench_link_rows() -> None:
+    result = bench_link(DEFAULT_DATA, ["ideal", "us915-sf9"], (0.0, 0.3), size=2, progress=False)
     rows = result["rows"]
     assert len(rows) == 2 * 2 * 3  # profiles x losses x (paper pair, first contact, 2x2)
     for row in rows:

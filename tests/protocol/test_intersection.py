@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from protocol.bench_paths import DEFAULT_DATA
 from protocol.errors import InputRangeError, LocalProtocolError, RemoteProtocolError
 from protocol.geometry import Point, path_hits
 from protocol.grid import GridKind, GridSpec
@@ -19,8 +19,6 @@ from protocol.wire import Suite
 
 from .adversarial import ADVERSARIAL, R
 from .paths import GRID, machines, run
-
-DATA = Path(__file__).resolve().parents[3] / "shared" / "anchor-data"
 
 
 @pytest.mark.parametrize(("name", "pair"), ADVERSARIAL, ids=[n for n, _ in ADVERSARIAL])
@@ -86,16 +84,12 @@ def test_paper_suite_multi_segment(keys: Any) -> None:
 
 
 def _read(name: str) -> list[tuple[Point, ...]]:
-    lines = (DATA / name).read_text().split()
+    lines = (DEFAULT_DATA / name).read_text().split()
     return [
         tuple((int(x), int(y)) for x, y in re.findall(r"\((-?\d+),(-?\d+)\)", ln)) for ln in lines
     ]
 
 
-needs_data = pytest.mark.skipif(not DATA.exists(), reason="the paper's data is in ../shared")
-
-
-@needs_data
 def test_paper_benchmark_pairs(ot_pair: Any) -> None:
     """The 30 pairs of the paper's benchmark against the answers in anchor-data/README.md."""
     expected = "110111000101101010000100000110"
@@ -107,7 +101,6 @@ def test_paper_benchmark_pairs(ot_pair: Any) -> None:
     assert got == expected
 
 
-@needs_data
 @pytest.mark.parametrize(
     ("route", "indices"), [(1, [0, 3]), (2, [0, 2]), (3, [0, 1, 2]), (4, []), (5, [1, 2, 3])]
 )
