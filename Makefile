@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck bench clean
+.PHONY: demo demo-px4 test lint typecheck bench clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "Python >= 3.11 is required")'
@@ -16,6 +16,12 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(PY) -m companion replay sitl_configs/scenarios/crossing.toml \
 		--out out/crossing.json --plot out/crossing.png
+
+# The crossing on two PX4 SITL (SIH) vehicles: make demo-px4 PX4_SITL=/path/to/px4-sitl
+demo-px4: $(STAMP)
+	@test -n "$(PX4_SITL)" || { echo "error: set PX4_SITL to a PX4 SITL build (bin/px4, etc/), e.g. make demo-px4 PX4_SITL=/path/to/px4-sitl" >&2; exit 2; }
+	$(PY) -m companion replay sitl_configs/scenarios/crossing.toml --px4 "$(PX4_SITL)" \
+		--out out/crossing-px4.json --plot out/crossing-px4.png
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check protocol companion tests scripts

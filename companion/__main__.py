@@ -15,6 +15,8 @@ from protocol.errors import ProtocolError
 from .link import Channel, Clock, Impairments
 from .link.udp import UdpHub
 
+DEFAULT_HOME = (47.397742, 8.545594, 488.0)  # PX4 SITL's default home
+
 
 def _stop_on_signals() -> asyncio.Event:
     """An event set by SIGINT/SIGTERM (install before announcing readiness)."""
@@ -46,10 +48,20 @@ async def _hub(args: argparse.Namespace) -> int:
 
 
 async def _mock(args: argparse.Namespace) -> int:
-    from .missionfile import read_mission
+    from .missionfile import read_mission_file
     from .mock_autopilot import Faults, FlightModel, MockAutopilot
 
-    mission = read_mission(args.mission) if args.mission else []
+    given = (args.home_lat, args.home_lon, args.home_alt)
+    home = tuple(DEFAULT_HOME[i] if v is None else v for i, v in enumerate(given))
+    mission = []
+    if args.mission:
+        plan = read_mission_file(args.mission)
+        if plan.home is not None and all(v is None for v in given):
+            home = plan.home  # the file's home, unless the command line gives one
+        mission = plan.for_autopilot(ardupilot=args.ardupilot)
+        if args.ardupilot:  # item 0 is the vehicle's home
+            lat, lon = round(home[0] * 1e7), round(home[1] * 1e7)
+            mission[0] = mission[0].replace(x=lat, y=lon, z=home[2])
     faults = Faults(
         drop_every=args.drop_every,
         latency_s=args.latency,
@@ -64,7 +76,7 @@ async def _mock(args: argparse.Namespace) -> int:
         ardupilot=args.ardupilot,
         faults=faults,
         flight=flight,
-        home=(args.home_lat, args.home_lon, args.home_alt),
+        home=(home[0], home[1], home[2]),
     )
     async with mock:
         stop = _stop_on_signals()
@@ -84,12 +96,15 @@ async def _mock(args: argparse.Namespace) -> int:
 
 
 def _mission_show(args: argparse.Namespace) -> int:
-    from .mission import segments, vertices
-    from .missionfile import read_mission
-
-    items = read_mission(args.file)
     from pymavlink.dialects.v20 import common as mavlink
 
+    from .flightpath import flight_path
+    from .missionfile import read_mission_file
+
+    plan = read_mission_file(args.file)
+    items = plan.for_autopilot(ardupilot=args.ardupilot)
+    home = plan.home_degE7
+    path = flight_path(items, home, ardupilot=args.ardupilot)
     commands = mavlink.enums["MAV_CMD"]
 
     def name(command: int) -> str:
@@ -97,17 +112,26 @@ def _mission_show(args: argparse.Namespace) -> int:
         entry = commands.get(command)
         return entry.name.removeprefix("MAV_CMD_") if entry is not None else str(command)
 
-    v = set(vertices(items, ardupilot=args.ardupilot))
-    print("| seq | command | frame | lat | lon | alt m | vertex |")
-    print("|---:|---|---:|---:|---:|---:|---|")
+    def where(k: int) -> str:
+        v = path.vertices[k]
+        items_ = "/".join(str(i) for i in v.items) or "-"
+        return f"{v.kind.value} (item {items_})"
+
+    on_path = {i for v in path.vertices for i in v.items}
+    movable = {i for v in path.vertices for i in v.moves}
+    if plan.home is not None:
+        print(f"home: {plan.home[0]:.7f}, {plan.home[1]:.7f}, {plan.home[2]:.1f} m AMSL")
+    print("| seq | command | frame | lat | lon | alt m | on path | edits move it |")
+    print("|---:|---|---:|---:|---:|---:|---|---|")
     for it in items:
         print(
             f"| {it.seq} | {name(it.command)} | {it.frame} | {it.x / 1e7:.7f} | {it.y / 1e7:.7f} "
-            f"| {it.z:.1f} | {'yes' if it.seq in v else ''} |"
+            f"| {it.z:.1f} | {'yes' if it.seq in on_path else ''} "
+            f"| {'yes' if it.seq in movable else ''} |"
         )
-    print("\nSegments (what the protocol compares):")
-    for k, (a, b) in enumerate(segments(items, ardupilot=args.ardupilot)):
-        print(f"  segment {k}: item {a} -> item {b}")
+    print(f"\nSegments of the flown path (what the protocol compares): {path.segments}")
+    for k in range(path.segments):
+        print(f"  segment {k}: {where(k)} -> {where(k + 1)}")
     return 0
 
 
@@ -115,6 +139,7 @@ async def _run(args: argparse.Namespace) -> int:
     import logging
 
     from .autopilot import Autopilot
+    from .autopilots import personality
     from .config import load_config
     from .link import LinkEndpoint, profile
     from .link.medium import Transport
@@ -151,7 +176,9 @@ async def _run(args: argparse.Namespace) -> int:
         transport = await UdpTransport.connect(settings.node, link.hub)
     endpoint = LinkEndpoint(settings.node, transport, profile(link.profile))
     log.info("node %d: connecting to the autopilot at %s", settings.node, settings.autopilot_url)
-    autopilot = await Autopilot.connect(settings.autopilot_url)
+    autopilot = await Autopilot.connect(
+        settings.autopilot_url, personality=personality(settings.ardupilot)
+    )
     companion = Companion(settings, endpoint, autopilot)
     stop = _stop_on_signals()
     try:
@@ -176,10 +203,18 @@ def _replay(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from .replay import format_report, load_scenario, plot_report, run_replay
+    from .sim_px4 import Px4Error, find_build
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     scenario = load_scenario(args.scenario)
-    replay = asyncio.run(run_replay(scenario, progress=not args.json))
+    try:
+        build = find_build(args.px4) if args.px4 else None
+        replay = asyncio.run(
+            run_replay(scenario, progress=not args.json, px4=build, px4_speed_max=args.px4_speed)
+        )
+    except Px4Error as exc:
+        print(f"error: PX4 SITL: {exc}", file=sys.stderr)
+        return 2
     report = replay.report
     if args.out:
         out = Path(args.out)
@@ -253,9 +288,11 @@ def main(argv: list[str] | None = None) -> int:
     mock.add_argument("--mission", help=".plan or QGC WPL 110 file to start with")
     mock.add_argument("--instance", type=int, default=0, help="binds 14580+I, sends to 14540+I")
     mock.add_argument("--ardupilot", action="store_true", help="ArduPilot personality")
-    mock.add_argument("--home-lat", type=float, default=47.397742)
-    mock.add_argument("--home-lon", type=float, default=8.545594)
-    mock.add_argument("--home-alt", type=float, default=488.0)
+    home_help = "home %s (default: the mission file's home, else %s)"
+    for key, default in zip(("lat", "lon", "alt"), DEFAULT_HOME, strict=True):
+        mock.add_argument(
+            f"--home-{key}", type=float, default=None, help=home_help % (key, default)
+        )
     mock.add_argument("--speed", type=float, default=10.0, help="cruise m/s")
     mock.add_argument("--time-scale", type=float, default=1.0)
     mock.add_argument("--drop-every", type=int, default=0, help="drop every k-th mission reply")
@@ -272,7 +309,11 @@ def main(argv: list[str] | None = None) -> int:
     show.add_argument("--ardupilot", action="store_true", help="item 0 is home")
 
     compare = sub.add_parser("compare", help="the encrypted path comparison over the radio link")
-    compare.add_argument("alice", help="Alice's paths: paper format (x,y)(x,y)... or .plan")
+    compare.add_argument(
+        "alice",
+        help="Alice's paths: paper format (x,y)(x,y)..., or a mission file (.plan, QGC WPL): "
+        "the path it flies",
+    )
     compare.add_argument("bob", help="Bob's paths, same format as Alice's")
     compare.add_argument(
         "--link",
@@ -303,6 +344,17 @@ def main(argv: list[str] | None = None) -> int:
     replay.add_argument("--json", action="store_true", help="print the report as JSON")
     replay.add_argument("--out", help="also write the JSON report to this file")
     replay.add_argument("--plot", help="write a PNG: ground tracks and altitude profiles")
+    replay.add_argument(
+        "--px4",
+        metavar="DIR",
+        help="fly PX4 SITL (SIH) vehicles from the build in DIR (bin/px4, etc/) instead of mocks",
+    )
+    replay.add_argument(
+        "--px4-speed",
+        type=float,
+        default=10.0,
+        help="largest SIH speed factor (the replay's time scale with --px4; default 10)",
+    )
 
     run = sub.add_parser("run", help="the companion process beside one autopilot")
     run.add_argument("--config", help="TOML settings (see companion/config.py)")

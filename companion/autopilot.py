@@ -2,9 +2,14 @@
 
 Connect, download and normalise, upload and verify.  The one promise: after
 :meth:`Autopilot.replace_mission` the vehicle holds either the new mission or the old one,
-never a mix -- the upload is read back and compared item by item, and on any failure the
-original is uploaded again (and read back) before the error is raised.  Every call is bounded
-by a timeout; a silent or vanished autopilot is an :class:`AutopilotError`, never a hang.
+never a mix -- the upload is read back and compared item by item by what the autopilot
+*means* (:meth:`companion.autopilots.Personality.same_meaning`: PX4 reads frame 3 back as 6,
+wraps yaw, zeroes parameters it does not keep), and on any failure the original is uploaded
+again (or, if the vehicle held none, the mission cleared) and read back before the error is
+raised.  A mission the autopilot would refuse is refused before anything is sent.  Read-backs
+wait ``settle_s`` after an upload and are retried (PX4 returns the previous mission to about
+2.5 % of downloads 10 ms after an upload).  Every call is bounded by a timeout; a silent or
+vanished autopilot is an :class:`AutopilotError`, never a hang.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from .autopilots import PX4, Personality
 from .mission import MissionError, MissionItem, normalise
 
 log = logging.getLogger(__name__)
@@ -33,6 +39,8 @@ class Timeouts:
     connect_s: float = 10.0
     transfer_s: float = 30.0  # one download or upload (MAVSDK retries inside)
     retries: int = 2  # extra attempts of a failed transfer
+    settle_s: float = 0.3  # between an upload and its read-back
+    readbacks: int = 3  # read-backs before a difference counts
 
 
 def to_mavsdk(item: MissionItem) -> Any:
@@ -78,16 +86,21 @@ def from_mavsdk(raw: Any) -> MissionItem:
 class Autopilot:
     """One vehicle: ``async with Autopilot.connect("udpin://0.0.0.0:14540") as ap: ...``."""
 
-    def __init__(self, mavsdk: Any, system: Any, timeouts: Timeouts) -> None:
+    def __init__(
+        self, mavsdk: Any, system: Any, timeouts: Timeouts, personality: Personality = PX4
+    ) -> None:
         from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
 
         self._mavsdk = mavsdk
         self.system = system
         self.timeouts = timeouts
+        self.personality = personality
         self.mission_raw = MissionRawAsync(system)
 
     @classmethod
-    async def connect(cls, url: str, timeouts: Timeouts | None = None) -> Autopilot:
+    async def connect(
+        cls, url: str, timeouts: Timeouts | None = None, personality: Personality = PX4
+    ) -> Autopilot:
         from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 
         timeouts = timeouts or Timeouts()
@@ -103,7 +116,7 @@ class Autopilot:
         if system is None:
             await mavsdk.__aexit__(None, None, None)
             raise AutopilotError(f"no autopilot heard on {url} within {timeouts.connect_s} s")
-        return cls(mavsdk, system, timeouts)
+        return cls(mavsdk, system, timeouts, personality)
 
     async def close(self) -> None:
         self.mission_raw.destroy()
@@ -129,6 +142,25 @@ class Autopilot:
         finally:
             telemetry.destroy()
         return float(p.latitude_deg), float(p.longitude_deg), float(p.absolute_altitude_m)
+
+    async def home(self, timeout_s: float = 5.0) -> tuple[int, int, float] | None:
+        """The vehicle's home (lat, lon degE7, alt AMSL) from HOME_POSITION, or None when the
+        autopilot has not told it within ``timeout_s`` (no home set yet)."""
+        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+        telemetry = TelemetryAsync(self.system)
+        try:
+            stream = telemetry.subscribe_home()
+            h = await asyncio.wait_for(anext(stream), timeout_s)
+            await stream.aclose()
+        except TimeoutError:
+            return None
+        finally:
+            telemetry.destroy()
+        lat, lon = round(float(h.latitude_deg) * 1e7), round(float(h.longitude_deg) * 1e7)
+        if (lat, lon) == (0, 0) or not (abs(lat) <= 900_000_000 and abs(lon) <= 1_800_000_000):
+            return None
+        return lat, lon, float(h.absolute_altitude_m)
 
     async def _call(self, what: str, call: Any) -> Any:
         from mavsdk.asyncio.plugins.mission_raw import MissionRawError
@@ -162,32 +194,53 @@ class Autopilot:
         raw = [to_mavsdk(i) for i in items]
         await self._call("mission upload", lambda: self.mission_raw.upload_mission(raw))
 
+    async def clear(self) -> None:
+        """Remove the vehicle's mission (MISSION_CLEAR_ALL)."""
+        await self._call("mission clear", self.mission_raw.clear_mission)
+
+    def _matches(self, held: Sequence[MissionItem], sent: Sequence[MissionItem]) -> bool:
+        same = self.personality.same_meaning
+        return len(held) == len(sent) and all(same(b, a) for a, b in zip(held, sent, strict=True))
+
     async def _verify(self, items: Sequence[MissionItem]) -> bool:
-        held = await self.download()
-        sent = normalise(items)
-        return len(held) == len(sent) and all(
-            a.replace(current=0).same_as(b.replace(current=0))
-            for a, b in zip(held, sent, strict=True)
-        )
+        """Read back until the vehicle holds ``items`` (by meaning) or the tries are spent."""
+        sent = normalise(items) if items else []
+        for attempt in range(max(self.timeouts.readbacks, 1)):
+            await asyncio.sleep(self.timeouts.settle_s * (attempt + 1))
+            held = await self.download()
+            if self._matches(held, sent):
+                return True
+        return False
+
+    async def _put(self, items: Sequence[MissionItem]) -> bool:
+        """Upload (an empty mission: clear) and verify."""
+        if items:
+            await self._upload(items)
+        else:
+            await self.clear()
+        return await self._verify(items)
 
     async def replace_mission(
         self, new: Sequence[MissionItem], original: Sequence[MissionItem]
     ) -> None:
-        """Upload ``new`` and verify it; on failure restore and verify ``original``."""
-        new = normalise(new)
+        """Upload ``new`` and verify it; on failure restore and verify ``original`` (an
+        empty ``original``: the mission is cleared).  A mission the autopilot would refuse
+        raises :class:`~companion.autopilots.UnsupportedItem` before anything is sent."""
         if not new:
             raise MissionError("refusing to upload an empty mission")
+        if not any(it.current for it in new):  # MAVSDK would mark item 0: a restart
+            raise MissionError("an upload must mark the item to continue at as current")
+        new = normalise(new)
+        self.personality.check(new)
         try:
-            await self._upload(new)
-            if await self._verify(new):
+            if await self._put(new):
                 return
             problem: Exception = AutopilotError("read-back differs from the upload")
         except AutopilotError as exc:
             problem = exc
         log.warning("mission edit failed (%s); restoring the original", problem)
         try:
-            await self._upload(original)
-            restored = await self._verify(original)
+            restored = await self._put(original)
         except AutopilotError as exc:
             raise AutopilotError(
                 f"edit failed ({problem}) and restoring the original failed too ({exc}); "

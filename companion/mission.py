@@ -1,16 +1,10 @@
-"""Mission items as the autopilot holds them (MAVLink MISSION_ITEM_INT), pure.
-
-The protocol compares *segments*: the legs between consecutive positional NAV items -- items
-whose command flies to or acts at a position (waypoint, loiter, land, spline, VTOL land,
-takeoff with a position) in a global frame.  Items without a position (speed changes, servo,
-camera, RTL, jumps) are not vertices and are never changed; ArduPilot's home (item 0) is never
-a vertex.  So segment i of the protocol is segment i of :func:`vertices`, and the planner edits
-exactly those items.
+"""Mission items as the autopilot holds them (MAVLink MISSION_ITEM_INT), pure: the item,
+its strict checks and normalisation.  Which ground path the items fly is
+:mod:`companion.flightpath`; what each autopilot does with them is :mod:`companion.autopilots`.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 import struct
 from collections.abc import Sequence
@@ -158,27 +152,3 @@ def normalise(items: Sequence[MissionItem]) -> list[MissionItem]:
     for item in out:
         item.check()
     return out
-
-
-def vertices(items: Sequence[MissionItem], *, ardupilot: bool = False) -> list[int]:
-    """Indices of the items that are path vertices (ArduPilot's home item 0 excluded)."""
-    start = 1 if ardupilot else 0
-    return [i for i in range(start, len(items)) if items[i].has_position]
-
-
-def path_of(items: Sequence[MissionItem], *, ardupilot: bool = False) -> list[tuple[int, int]]:
-    """The mission's ground track as (lat, lon) degE7 vertices."""
-    return [(items[i].x, items[i].y) for i in vertices(items, ardupilot=ardupilot)]
-
-
-def segments(items: Sequence[MissionItem], *, ardupilot: bool = False) -> list[tuple[int, int]]:
-    """Segment k as the pair of item indices it joins."""
-    v = vertices(items, ardupilot=ardupilot)
-    return list(itertools.pairwise(v))
-
-
-def remaining(items: Sequence[MissionItem], current: int, *, ardupilot: bool = False) -> int:
-    """Index of the first segment still to fly when item ``current`` is the active one."""
-    v = vertices(items, ardupilot=ardupilot)
-    ahead = [k for k, index in enumerate(v) if index >= current]
-    return max((ahead[0] - 1) if ahead else len(v) - 1, 0)

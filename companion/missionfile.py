@@ -12,10 +12,24 @@ import math
 import os
 import tempfile
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .mission import FRAMES_GLOBAL, MissionError, MissionItem, normalise
+from .mission import (
+    EARTH_RADIUS_M,
+    FRAMES_GLOBAL,
+    NAV_LAND,
+    NAV_LOITER_TO_ALT,
+    NAV_TAKEOFF,
+    NAV_VTOL_LAND,
+    NAV_VTOL_TAKEOFF,
+    NAV_WAYPOINT,
+    POSITIONAL_NAV,
+    MissionError,
+    MissionItem,
+    normalise,
+)
 
 WPL_HEADER = "QGC WPL 110"
 MAX_FILE_BYTES = 16 << 20
@@ -75,12 +89,205 @@ def _complete(items: list[MissionItem], name: str) -> list[MissionItem]:
 
 # ---------------------------------------------------------------------------- .plan
 
+# commands that may stand "here", without a position (QGC writes null lat/lon for them)
+POSITION_OPTIONAL = frozenset({NAV_TAKEOFF, NAV_VTOL_TAKEOFF, NAV_LAND, NAV_VTOL_LAND})
+NULL_ALTITUDE_HINT = (
+    "QGroundControl writes null when an altitude 'calculated above terrain' had no terrain "
+    "data: open the plan with terrain data and save it again, or give the altitude"
+)
 
-def parse_plan_items(text: str, name: str = "plan") -> tuple[list[MissionItem], tuple[float, ...]]:
-    """Mission items and the planned home (lat, lon, alt) of a QGC plan."""
+
+@dataclass(frozen=True)
+class MissionFile:
+    """A mission as a file states it: the items to fly (without any home item) and the
+    planned home (lat, lon, alt AMSL), if the file gives one."""
+
+    items: list[MissionItem]
+    home: tuple[float, float, float] | None
+
+    @property
+    def home_degE7(self) -> tuple[int, int] | None:
+        return None if self.home is None else (round(self.home[0] * 1e7), round(self.home[1] * 1e7))
+
+    def for_autopilot(self, *, ardupilot: bool = False) -> list[MissionItem]:
+        """The items as the autopilot should hold them: ArduPilot's item 0 is home; PX4
+        takes a take-off's latitude/longitude literally, so a take-off "here" (0,0 in the
+        file) gets home's position, as QGroundControl writes it."""
+        if not ardupilot:
+            home = self.home_degE7
+            return normalise(
+                [
+                    it.replace(x=home[0], y=home[1])
+                    if home is not None
+                    and it.command in (NAV_TAKEOFF, NAV_VTOL_TAKEOFF)
+                    and it.frame in FRAMES_GLOBAL
+                    and (it.x, it.y) == (0, 0)
+                    else it
+                    for it in self.items
+                ]
+            )
+        if self.home is None:
+            raise MissionError("an ArduPilot mission needs a home (item 0): the file has none")
+        lat, lon = self.home_degE7 or (0, 0)
+        home_item = MissionItem(0, 0, NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, lat, lon, self.home[2])
+        return normalise([home_item, *self.items])
+
+
+def _simple_item(raw: dict[str, Any], number: int, where: str) -> MissionItem:
+    params = raw.get("params")
+    if not isinstance(params, list) or len(params) != 7:
+        raise MissionError(f"{where}: params must be a list of 7")
+    p = [_num(v, where) for v in params]
+    command, frame = raw.get("command"), raw.get("frame")
+    if not isinstance(command, int) or not isinstance(frame, int):
+        raise MissionError(f"{where}: command and frame must be integers")
+    if isinstance(raw.get("autoContinue"), bool | int | None) is False:
+        raise MissionError(f"{where}: autoContinue must be true or false")
+    x = y = 0
+    z = p[6]
+    if frame in FRAMES_GLOBAL and command in POSITIONAL_NAV:
+        if not (math.isfinite(p[4]) and math.isfinite(p[5])):
+            if command not in POSITION_OPTIONAL:
+                raise MissionError(f"{where}: command {command} needs a latitude and longitude")
+            p[4] = p[5] = 0.0  # take off / land where the vehicle is
+        if not math.isfinite(z):
+            raise MissionError(f"{where}: altitude is null ({NULL_ALTITUDE_HINT})")
+    elif not math.isfinite(z):
+        z = 0.0  # a command without a position: its param7 is not an altitude
+    if frame in FRAMES_GLOBAL:
+        x, y = _xy(frame, p[4], p[5])
+    else:
+        x, y = _xy(frame, *(v if math.isfinite(v) else 0.0 for v in (p[4], p[5])))
+    item = MissionItem(
+        number,
+        frame,
+        command,
+        0,
+        int(bool(raw.get("autoContinue", True))),
+        p[0],
+        p[1],
+        p[2],
+        p[3],
+        x,
+        y,
+        z,
+    )
+    return _checked(item, where)
+
+
+def _offset_ring(
+    polygon: list[tuple[float, float]], distance_m: float
+) -> list[tuple[float, float]]:
+    """A polygon (lat, lon degrees) pushed ``distance_m`` outward: each edge moved out, the
+    new corners where neighbouring moved edges meet (QGC's structure-scan flight ring)."""
+    lat0, lon0 = polygon[0]
+    kx = EARTH_RADIUS_M * math.cos(math.radians(lat0)) * math.pi / 180
+    ky = EARTH_RADIUS_M * math.pi / 180
+    pts = [((lon - lon0) * kx, (lat - lat0) * ky) for lat, lon in polygon]
+    area = sum(a[0] * b[1] - b[0] * a[1] for a, b in zip(pts, pts[1:] + pts[:1], strict=True))
+    sign = 1.0 if area > 0 else -1.0  # outward normal of a counter-clockwise ring: (dy, -dx)
+    lines = []
+    for a, b in zip(pts, pts[1:] + pts[:1], strict=True):
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        length = math.hypot(dx, dy) or 1.0
+        nx, ny = sign * dy / length, -sign * dx / length
+        lines.append(((a[0] + nx * distance_m, a[1] + ny * distance_m), (dx, dy)))
+    out = []
+    for (p1, d1), (p2, d2) in zip(lines[-1:] + lines[:-1], lines, strict=True):
+        cross = d1[0] * d2[1] - d1[1] * d2[0]
+        if abs(cross) < 1e-9:
+            x, y = p2
+        else:
+            t = ((p2[0] - p1[0]) * d2[1] - (p2[1] - p1[1]) * d2[0]) / cross
+            x, y = p1[0] + t * d1[0], p1[1] + t * d1[1]
+        out.append((lat0 + y / ky, lon0 + x / kx))
+    return out
+
+
+def _complex_items(raw: dict[str, Any], where: str) -> list[MissionItem]:
+    """The items QGroundControl uploads for a complex item: survey and corridor scans carry
+    them (``TransectStyleComplexItem.Items``); a structure scan is rebuilt from its polygon
+    (one ring per layer, at the scan distance); landing patterns from their loiter and
+    landing points."""
+    kind = raw.get("complexItemType")
+    transect = raw.get("TransectStyleComplexItem")
+    if isinstance(transect, dict) and isinstance(transect.get("Items"), list):
+        out = []
+        for k, sub in enumerate(transect["Items"]):
+            if not isinstance(sub, dict) or sub.get("type") != "SimpleItem":
+                raise MissionError(f"{where} ({kind}): generated item {k} is not a SimpleItem")
+            out.append(_simple_item(sub, k, f"{where} ({kind}) generated item {k}"))
+        if not out:
+            raise MissionError(f"{where} ({kind}): no generated items (save it in QGC again)")
+        return out
+    if kind == "StructureScan":
+        return _structure_scan(raw, where)
+    if kind in ("fwLandingPattern", "vtolLandingPattern"):
+        return _landing_pattern(raw, where)
+    raise MissionError(
+        f"{where}: complex item {kind!r} without generated items is not supported "
+        "(convert it to waypoints in QGroundControl)"
+    )
+
+
+def _structure_scan(raw: dict[str, Any], where: str) -> list[MissionItem]:
+    poly = raw.get("polygon")
+    camera = raw.get("CameraCalc")
+    if not isinstance(poly, list) or len(poly) < 3 or not isinstance(camera, dict):
+        raise MissionError(f"{where} (StructureScan): needs a polygon and CameraCalc")
+    points = [(_num(p[0], where), _num(p[1], where)) for p in poly if isinstance(p, list)]
+    distance = _num(camera.get("DistanceToSurface", 0.0), where)
+    layers = int(_num(raw.get("Layers", 1), where))
+    bottom = _num(raw.get("ScanBottomAlt", 0.0), where)
+    height = _num(raw.get("StructureHeight", 0.0), where)
+    entrance = _num(raw.get("EntranceAltitude", bottom), where)
+    values = [*(c for p in points for c in p), distance, bottom, height, entrance]
+    if len(points) < 3 or not all(math.isfinite(v) for v in values) or not 1 <= layers <= 100:
+        raise MissionError(f"{where} (StructureScan): polygon, distance or layers invalid")
+    ring = _offset_ring(points, distance)
+    frame = 3  # QGC scans relative to home
+    out: list[MissionItem] = []
+
+    def wp(lat: float, lon: float, alt: float) -> None:
+        x, y = _xy(frame, lat, lon)
+        out.append(MissionItem(len(out), frame, NAV_WAYPOINT, 0, 1, 0, 0, 0, math.nan, x, y, alt))
+
+    wp(*ring[0], entrance)
+    step = height / layers
+    for layer in range(layers):
+        alt = bottom + step * (layer + 0.5)
+        for lat, lon in [*ring, ring[0]]:
+            wp(lat, lon, alt)
+    wp(*ring[0], entrance)
+    return [_checked(it, f"{where} (StructureScan)") for it in out]
+
+
+def _landing_pattern(raw: dict[str, Any], where: str) -> list[MissionItem]:
+    kind = raw.get("complexItemType")
+    loiter, land = raw.get("loiterCoordinate"), raw.get("landCoordinate")
+    if not (isinstance(loiter, list) and isinstance(land, list) and len(loiter) == len(land) == 3):
+        raise MissionError(f"{where} ({kind}): needs loiterCoordinate and landCoordinate")
+    lo = [_num(v, where) for v in loiter]
+    la = [_num(v, where) for v in land]
+    radius = _num(raw.get("loiterRadius", 0.0), where)
+    if not all(math.isfinite(v) for v in (*lo, *la, radius)):
+        raise MissionError(f"{where} ({kind}): coordinates must be numbers")
+    frame = 3 if raw.get("altitudesAreRelative", True) else 0
+    lx, ly = _xy(frame, lo[0], lo[1])
+    dx, dy = _xy(frame, la[0], la[1])
+    out = [
+        MissionItem(0, 2, 189, 0, 1, 0, 0, 0, 0, 0, 0, 0.0),  # DO_LAND_START
+        MissionItem(1, frame, NAV_LOITER_TO_ALT, 0, 1, 1, radius, 0, 1, lx, ly, lo[2]),
+        MissionItem(2, frame, NAV_LAND, 0, 1, 0, 0, 0, math.nan, dx, dy, la[2]),
+    ]
+    return [_checked(it, f"{where} ({kind})") for it in out]
+
+
+def parse_plan_file(text: str, name: str = "plan") -> MissionFile:
+    """A QGroundControl plan: its items (complex items expanded) and planned home."""
     try:
         doc = json.loads(text)
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, RecursionError) as exc:
         raise MissionError(f"{name}: not JSON ({exc})") from None
     mission = doc.get("mission") if isinstance(doc, dict) else None
     if not isinstance(mission, dict) or not isinstance(mission.get("items"), list):
@@ -88,45 +295,31 @@ def parse_plan_items(text: str, name: str = "plan") -> tuple[list[MissionItem], 
     home_raw = mission.get("plannedHomePosition")
     if not isinstance(home_raw, list) or len(home_raw) != 3:
         raise MissionError(f"{name}: plannedHomePosition must be [lat, lon, alt]")
-    home = tuple(_num(v, f"{name}: home") for v in home_raw)
-    items = []
+    hlat, hlon, halt = (_num(v, f"{name}: home") for v in home_raw)
+    if not (math.isfinite(hlat) and math.isfinite(hlon)):
+        raise MissionError(f"{name}: plannedHomePosition has no latitude/longitude")
+    if not (-90 <= hlat <= 90 and -180 <= hlon <= 180):
+        raise MissionError(f"{name}: plannedHomePosition outside the globe")
+    home = (hlat, hlon, halt if math.isfinite(halt) else 0.0)
+    items: list[MissionItem] = []
     for number, raw in enumerate(mission["items"]):
         where = f"{name}: mission item {number}"
         if not isinstance(raw, dict):
             raise MissionError(f"{where}: not an object")
-        if raw.get("type") != "SimpleItem":
-            raise MissionError(
-                f"{where}: {raw.get('type')!r} items are not supported "
-                "(convert complex items to waypoints in QGroundControl)"
-            )
-        params = raw.get("params")
-        if not isinstance(params, list) or len(params) != 7:
-            raise MissionError(f"{where}: params must be a list of 7")
-        p = [_num(v, where) for v in params]
-        command, frame = raw.get("command"), raw.get("frame")
-        if not isinstance(command, int) or not isinstance(frame, int):
-            raise MissionError(f"{where}: command and frame must be integers")
-        if frame in FRAMES_GLOBAL and not (math.isfinite(p[4]) and math.isfinite(p[5])):
-            p[4] = p[5] = 0.0  # a NAV item without a position (e.g. takeoff here)
-        x, y = _xy(
-            frame, p[4] if math.isfinite(p[4]) else 0.0, p[5] if math.isfinite(p[5]) else 0.0
-        )
-        item = MissionItem(
-            number,
-            frame,
-            command,
-            0,
-            int(bool(raw.get("autoContinue", True))),
-            p[0],
-            p[1],
-            p[2],
-            p[3],
-            x,
-            y,
-            p[6] if math.isfinite(p[6]) else 0.0,
-        )
-        items.append(_checked(item, where))
-    return _complete(items, name), home
+        if raw.get("type") == "SimpleItem":
+            items.append(_simple_item(raw, len(items), where))
+        elif raw.get("type") == "ComplexItem":
+            items.extend(_complex_items(raw, where))
+        else:
+            raise MissionError(f"{where}: unknown item type {raw.get('type')!r}")
+    items = [it.replace(seq=i) for i, it in enumerate(items)]
+    return MissionFile(_complete(items, name), home)
+
+
+def parse_plan_items(text: str, name: str = "plan") -> tuple[list[MissionItem], tuple[float, ...]]:
+    """Mission items and the planned home (lat, lon, alt) of a QGC plan."""
+    plan = parse_plan_file(text, name)
+    return plan.items, plan.home or ()
 
 
 def read_plan(path: str | Path) -> tuple[list[MissionItem], tuple[float, ...]]:
@@ -186,17 +379,20 @@ def write_plan(path: str | Path, items: Sequence[MissionItem], home: Sequence[fl
 # ---------------------------------------------------------------------------- QGC WPL 110
 
 
-def parse_wpl(text: str, name: str = "mission") -> list[MissionItem]:
-    """``QGC WPL 110``: one tab-separated item per line (seq current frame command p1-p4
-    lat lon alt autocontinue)."""
+def parse_wpl_file(text: str, name: str = "mission") -> MissionFile:
+    """``QGC WPL 110``: one item per line (seq current frame command p1-p4 lat lon alt
+    autocontinue, tab- or space-separated).  Read as QGroundControl, MAVProxy and ArduPilot
+    read it: the first item is home, the rest is the mission; ``#`` lines are comments and
+    sequence numbers only order the lines (a file may start at 1)."""
     lines = text.splitlines()
     if not lines or lines[0].strip() != WPL_HEADER:
         raise MissionError(f"{name}: line 1: expected {WPL_HEADER!r}")
     items: list[MissionItem] = []
+    last_seq = -1
     for number, line in enumerate(lines[1:], start=2):
-        if not line.strip():
+        if not line.strip() or line.lstrip().startswith("#"):
             continue
-        fields = line.split("\t") if "\t" in line else line.split()
+        fields = line.split()
         where = f"{name}: line {number}"
         if len(fields) != 12:
             raise MissionError(f"{where}: expected 12 fields, found {len(fields)}")
@@ -206,23 +402,53 @@ def parse_wpl(text: str, name: str = "mission") -> list[MissionItem]:
             autocontinue = int(fields[11])
         except ValueError as exc:
             raise MissionError(f"{where}: {exc}") from None
-        if seq != len(items):
-            raise MissionError(f"{where}: sequence number {seq}, expected {len(items)}")
-        x, y = _xy(frame, p[4], p[5])
+        if seq <= last_seq:
+            raise MissionError(f"{where}: sequence number {seq} after {last_seq}")
+        last_seq = seq
+        if frame in FRAMES_GLOBAL and command in POSITIONAL_NAV and not math.isfinite(p[6]):
+            raise MissionError(f"{where}: altitude is not a number")
+        x, y = _xy(frame, p[4], p[5]) if all(map(math.isfinite, p[4:6])) else (0, 0)
         item = MissionItem(
-            seq, frame, command, current, autocontinue, p[0], p[1], p[2], p[3], x, y, p[6]
+            len(items),
+            frame,
+            command,
+            current,
+            autocontinue,
+            p[0],
+            p[1],
+            p[2],
+            p[3],
+            x,
+            y,
+            p[6] if math.isfinite(p[6]) else 0.0,
         )
         items.append(_checked(item, where))
-    return _complete(items, name)
+    if not items:
+        raise MissionError(f"{name}: no items (the first line after the header is home)")
+    first = items[0]
+    if first.frame not in FRAMES_GLOBAL or (first.x, first.y) == (0, 0):
+        raise MissionError(f"{name}: the first item is home and needs a position")
+    home = (first.x / 1e7, first.y / 1e7, first.z)
+    rest = [it.replace(seq=i) for i, it in enumerate(items[1:])]
+    return MissionFile(_complete(rest, name), home)
+
+
+def parse_wpl(text: str, name: str = "mission") -> list[MissionItem]:
+    """The mission items of a WPL file (home excluded)."""
+    return parse_wpl_file(text, name).items
 
 
 def read_wpl(path: str | Path) -> list[MissionItem]:
     return parse_wpl(_read(path), str(path))
 
 
-def format_wpl(items: Sequence[MissionItem]) -> str:
+def format_wpl(items: Sequence[MissionItem], home: Sequence[float]) -> str:
+    """WPL with ``home`` (lat, lon, alt AMSL) as item 0, the items after it."""
+    first = MissionItem(
+        0, 0, NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, round(home[0] * 1e7), round(home[1] * 1e7), home[2]
+    )
     rows = [WPL_HEADER]
-    for it in items:
+    for it in [first, *(it.replace(seq=i + 1) for i, it in enumerate(items))]:
         lat = it.x / 1e7 if it.frame in FRAMES_GLOBAL else float(it.x)
         lon = it.y / 1e7 if it.frame in FRAMES_GLOBAL else float(it.y)
         fields = [
@@ -243,13 +469,18 @@ def format_wpl(items: Sequence[MissionItem]) -> str:
     return "\n".join(rows) + "\n"
 
 
-def write_wpl(path: str | Path, items: Sequence[MissionItem]) -> None:
-    _write_atomic(path, format_wpl(items))
+def write_wpl(path: str | Path, items: Sequence[MissionItem], home: Sequence[float]) -> None:
+    _write_atomic(path, format_wpl(items, home))
 
 
-def read_mission(path: str | Path) -> list[MissionItem]:
+def read_mission_file(path: str | Path) -> MissionFile:
     """Either format, by content."""
     text = _read(path)
     if text.lstrip().startswith(WPL_HEADER):
-        return parse_wpl(text, str(path))
-    return parse_plan_items(text, str(path))[0]
+        return parse_wpl_file(text, str(path))
+    return parse_plan_file(text, str(path))
+
+
+def read_mission(path: str | Path) -> list[MissionItem]:
+    """The mission items of either format (home excluded)."""
+    return read_mission_file(path).items

@@ -1,12 +1,14 @@
 """A mock autopilot that speaks real MAVLink 2 over UDP (pymavlink for encoding only).
 
 Enough of PX4 (or ArduPilot) for MAVSDK and any ground station: HEARTBEAT from component 1,
-AUTOPILOT_VERSION and HOME_POSITION on request, the whole mission protocol for the mission,
-fence and rally types (download, upload, clear, set current, MISSION_CURRENT), command
-acknowledgements, GLOBAL_POSITION_INT telemetry, and a kinematic flight model that flies the
-stored mission in scaled time.  Ports as PX4 SITL: instance i binds 14580+i, sends to 14540+i,
-system id i+1.  Uploads are atomic: the stored mission changes only when the last item arrived;
-an upload during flight takes effect as on PX4, continuing at the current item.  Faults can be
+AUTOPILOT_VERSION and HOME_POSITION, the mission protocol for the mission, fence and rally
+types (:mod:`companion.mock_missions`), command acknowledgements, GLOBAL_POSITION_INT
+telemetry, and a kinematic flight model that flies the stored mission in scaled time,
+DO_JUMP loops included.  Links as PX4 SITL (:mod:`companion.mock_links`): instance i has an
+API link (binds 14580+i, sends to 14540+i) and a GCS link (binds 18570+i, sends to 14550),
+system id i+1.  The firmware's personality (:mod:`companion.autopilots`) decides which items
+are refused, how they are stored, and where an upload leaves the current item (PX4: at the
+item marked current in the upload, in flight too; ArduPilot: where it was).  Faults can be
 injected (dropped replies, latency, ignored messages, rejected uploads, vanishing).
 """
 
@@ -16,11 +18,14 @@ import asyncio
 import contextlib
 import math
 import time
-from dataclasses import dataclass, field
-from typing import Any, cast
+from dataclasses import dataclass
+from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from . import mock_links as wire
+from .autopilots import personality
+from .flightpath import DO_JUMP
 from .mission import (
     EARTH_RADIUS_M,
     FRAMES_AMSL,
@@ -31,40 +36,21 @@ from .mission import (
     MissionItem,
     ground_offset,
 )
+from .mock_links import PX4_BIND, PX4_GCS_BIND, PX4_GCS_SEND, PX4_SEND, Faults, Link
+from .mock_missions import MissionServer, item_message
 
-PX4_BIND, PX4_SEND = 14580, 14540
-ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
-RETRY_S, RETRIES = 0.25, 8  # the autopilot drives uploads: it re-requests lost items
-
-
-@dataclass(frozen=True)
-class Faults:
-    """Fault injection: every field off by default."""
-
-    drop_every: int = 0  # drop every k-th mission-protocol reply
-    latency_s: float = 0.0  # added to every reply
-    ignore: frozenset[str] = frozenset()  # MAVLink message names to ignore, e.g. MISSION_COUNT
-    reject_upload: int | None = None  # MAV_MISSION_RESULT to answer every upload with
-    vanish_after_s: float | None = None  # stop answering and sending after this (real) time
-    garble_uploads: int = 0  # store the next N uploads with the last item's altitude wrong
+__all__ = ["PX4_BIND", "PX4_SEND", "Faults", "FlightModel", "MockAutopilot", "item_message"]
 
 
 @dataclass(frozen=True)
 class FlightModel:
+    """Kinematics of the simulated multicopter and how fast simulated time runs."""
+
     cruise_m_s: float = 10.0
     climb_m_s: float = 3.0
     acceptance_m: float = 2.0
     time_scale: float = 1.0  # simulated seconds per real second
     rate_hz: float = 10.0
-
-
-@dataclass
-class _Upload:
-    mission_type: int
-    count: int
-    items: list[MissionItem] = field(default_factory=list)
-    tries: int = 0
-    timer: asyncio.TimerHandle | None = None
 
 
 def _moved(lat: float, lon: float, north: float, east: float) -> tuple[float, float]:
@@ -74,29 +60,14 @@ def _moved(lat: float, lon: float, north: float, east: float) -> tuple[float, fl
     return lat + dlat, lon + dlon
 
 
-def item_message(mav: Any, target_system: int, target_component: int, it: MissionItem) -> Any:
-    """MISSION_ITEM_INT for one item."""
-    return mav.mission_item_int_encode(
-        target_system,
-        target_component,
-        it.seq,
-        it.frame,
-        it.command,
-        it.current,
-        it.autocontinue,
-        it.param1,
-        it.param2,
-        it.param3,
-        it.param4,
-        it.x,
-        it.y,
-        it.z,
-        it.mission_type,
-    )
+class MockAutopilot(MissionServer):
+    """``await MockAutopilot(instance, mission=...).start()``; ``await stop()``.
 
-
-class MockAutopilot(asyncio.DatagramProtocol):
-    """``await MockAutopilot(instance, mission=...).start()``; ``await stop()``."""
+    Ports: ``bind_port``/``send_port`` are the API link (default 14580+i / 14540+i).  The GCS
+    link binds ``gcs_bind_port`` and sends to ``gcs_send_port`` (default 14550); by default
+    it is opened (18570+i) only when ``bind_port`` is not given -- explicit ports are for tests
+    and replays that run many mocks in one process --, and ``gcs_bind_port=0`` never opens it.
+    """
 
     def __init__(
         self,
@@ -110,51 +81,60 @@ class MockAutopilot(asyncio.DatagramProtocol):
         host: str = "127.0.0.1",
         bind_port: int | None = None,
         send_port: int | None = None,
+        gcs_bind_port: int | None = None,
+        gcs_send_port: int = PX4_GCS_SEND,
     ) -> None:
         self.instance = instance
         self.sysid = instance + 1
         self.ardupilot = ardupilot
-        self.faults = faults or Faults()
         self.flight = flight or FlightModel()
         self.host = host
         self.bind_port = PX4_BIND + instance if bind_port is None else bind_port
         self.send_port = PX4_SEND + instance if send_port is None else send_port
-        self.home = home
-        self.mav = mavlink.MAVLink(None, srcSystem=self.sysid, srcComponent=1)
-        self.mav.robust_parsing = True
-        self.stores: dict[int, list[MissionItem]] = {0: [], 1: [], 2: []}
-        if mission:
-            self.stores[0] = [m.replace(seq=i, current=0) for i, m in enumerate(mission)]
-        if ardupilot and not self.stores[0]:
-            self.stores[0] = [self._home_item()]
-        self.current = 1 if ardupilot and len(self.stores[0]) > 1 else 0
+        if gcs_bind_port is None:
+            gcs_bind_port = PX4_GCS_BIND + instance if bind_port is None else 0
+        self.gcs_bind_port, self.gcs_send_port = gcs_bind_port, gcs_send_port
+        self.mav = mavlink.MAVLink(None, srcSystem=self.sysid, srcComponent=1)  # encoder
+        super().__init__(personality(ardupilot), home, faults or Faults(), mission)
+        self.current = 1 if ardupilot and len(self.mission) > 1 else 0
         self.lat, self.lon, self.alt = home[0], home[1], 0.0  # alt: metres above home
         self.armed = False
         self.flying = False
         self.mission_running = False
         self.holding = False  # paused in flight (hold / loiter mode)
         self.trajectory: list[tuple[float, float, float, float]] = []
-        self.uploads_accepted = 0
+        self.reached: list[int] = []  # items reached in flight, in order (MISSION_ITEM_REACHED)
         self.received: dict[str, int] = {}
-        self._upload: _Upload | None = None
+        self.links: list[Link] = []
+        self.api_link: Link | None = None
+        self.gcs_link: Link | None = None
         self._replies = 0
-        self._peer: tuple[str, int] = (host, self.send_port)
-        self._transport: asyncio.DatagramTransport | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._started = 0.0
         self.origin = 0.0
         self._sim_time = 0.0
         self._takeoff_alt: float | None = None
-        self._garbles_left = self.faults.garble_uploads
         self._rtl_descending = False
         self._hold_until: float | None = None
 
     # ------------------------------------------------------------------ lifecycle
 
     async def start(self, origin: float | None = None) -> MockAutopilot:
-        """Bind and run; ``origin`` (time.monotonic) is simulated time zero."""
-        loop = asyncio.get_running_loop()
-        await loop.create_datagram_endpoint(lambda: self, local_addr=(self.host, self.bind_port))
+        """Open the links and run; ``origin`` (time.monotonic) is simulated time zero."""
+        self.api_link = Link("api", self.host, self.bind_port, self.send_port, self.sysid, self._on)
+        self.links = [self.api_link]
+        if self.gcs_bind_port:
+            self.gcs_link = Link(
+                "gcs", self.host, self.gcs_bind_port, self.gcs_send_port, self.sysid, self._on
+            )
+            self.links.append(self.gcs_link)
+        try:
+            for link in self.links:
+                await link.open()
+        except BaseException:
+            for link in self.links:
+                link.close()
+            raise
         self._started = time.monotonic()
         self.origin = self._started if origin is None else origin
         self._tasks = [
@@ -169,8 +149,8 @@ class MockAutopilot(asyncio.DatagramProtocol):
         for task in self._tasks:
             with contextlib.suppress(asyncio.CancelledError):
                 await task
-        if self._transport is not None:
-            self._transport.close()
+        for link in self.links:
+            link.close()
 
     async def __aenter__(self) -> MockAutopilot:
         return await self.start()
@@ -178,228 +158,114 @@ class MockAutopilot(asyncio.DatagramProtocol):
     async def __aexit__(self, *exc: object) -> None:
         await self.stop()
 
-    @property
-    def mission(self) -> list[MissionItem]:
-        return self.stores[0]
-
     def _vanished(self) -> bool:
         limit = self.faults.vanish_after_s
         return limit is not None and time.monotonic() - self._started > limit
 
-    def _home_item(self) -> MissionItem:
-        lat, lon, alt = self.home
-        return MissionItem(0, 0, 16, 0, 1, 0, 0, 0, 0, round(lat * 1e7), round(lon * 1e7), alt)
-
     # ------------------------------------------------------------------ sending
 
-    def _send(self, message: Any, *, reply: bool = False) -> None:
-        if self._transport is None or self._transport.is_closing() or self._vanished():
+    def _send(self, message: Any, link: Link | None = None, *, reply: bool = False) -> None:
+        """To ``link`` (a reply: faults apply) or, without one, on every link."""
+        if self._vanished():
             return
         if reply:
             self._replies += 1
             if self.faults.drop_every and self._replies % self.faults.drop_every == 0:
                 return
-        data = message.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
-        if reply and self.faults.latency_s:
-            asyncio.get_running_loop().call_later(
-                self.faults.latency_s, self._transport.sendto, data, self._peer
-            )
-        else:
-            self._transport.sendto(data, self._peer)
+        delay = self.faults.latency_s if reply else 0.0
+        for each in [link] if link is not None else self.links:
+            each.send(message, delay)
+
+    def _reply(self, link: Link, message: Any) -> None:
+        self._send(message, link, reply=True)
 
     def _heartbeat(self) -> None:
-        autopilot = (
-            mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA if self.ardupilot else mavlink.MAV_AUTOPILOT_PX4
-        )
-        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-        if self.armed:
-            base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-        custom = (4 << 16) | (4 << 24) if self.mission_running and not self.ardupilot else 0
-        state = mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
-        self._send(
-            self.mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, autopilot, base, custom, state, 3)
-        )
+        self._send(wire.heartbeat(self.mav, self.ardupilot, self.armed, self.mission_running))
+
+    def _report_current(self) -> None:
+        self._send(self.mav.mission_current_encode(self.current, len(self.mission), 0, 0))
 
     async def _heartbeats(self) -> None:
         while True:
             self._heartbeat()
-            self._send(self.mav.mission_current_encode(self.current, len(self.mission), 0, 0))
+            self._report_current()
+            self._send(wire.home_position(self.mav, self.home))
             await asyncio.sleep(1.0)
 
     # ------------------------------------------------------------------ receiving
 
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        self._transport = cast(asyncio.DatagramTransport, transport)
-
-    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+    def _on(self, link: Link, message: Any) -> None:
+        """A message arrived on ``link``: dispatch to ``_on_<name>(link, message)``."""
         if self._vanished():
             return
-        try:
-            messages = self.mav.parse_buffer(data) or []
-        except mavlink.MAVError:
+        name = message.get_type()
+        if name in self.faults.ignore:
             return
-        for message in messages:
-            name = message.get_type()
-            if name == "BAD_DATA" or name in self.faults.ignore:
-                continue
-            target = getattr(message, "target_system", self.sysid)
-            if target not in (0, self.sysid):
-                continue
-            self._peer = addr
-            self.received[name] = self.received.get(name, 0) + 1
-            handler = getattr(self, f"_on_{name.lower()}", None)
-            if handler is not None:
-                handler(message)
-
-    # mission download
-    def _on_mission_request_list(self, m: Any) -> None:
-        store = self.stores.get(m.mission_type, [])
-        self._send(
-            self.mav.mission_count_encode(
-                m.get_srcSystem(), m.get_srcComponent(), len(store), m.mission_type
-            ),
-            reply=True,
-        )
-
-    def _on_mission_request_int(self, m: Any) -> None:
-        store = self.stores.get(m.mission_type, [])
-        if not 0 <= m.seq < len(store):
-            self._ack(m, mavlink.MAV_MISSION_INVALID_SEQUENCE, m.mission_type)
+        target = getattr(message, "target_system", self.sysid)
+        if target not in (0, self.sysid):
             return
-        it = store[m.seq].replace(current=int(m.mission_type == 0 and m.seq == self.current))
-        self._send(
-            item_message(self.mav, m.get_srcSystem(), m.get_srcComponent(), it),
-            reply=True,
-        )
+        self.received[name] = self.received.get(name, 0) + 1
+        handler = getattr(self, f"_on_{name.lower()}", None)
+        if handler is not None:
+            handler(link, message)
 
-    _on_mission_request = _on_mission_request_int
+    def _mission_replaced(self, marked: int | None) -> None:
+        """PX4 restarts at the item marked current (in flight too), else keeps its index;
+        ArduPilot ignores the mark: keeps its index in flight, item 1 on the ground."""
+        last = max(len(self.mission) - 1, 0)
+        before = self.current
+        if self.personality.home_is_item0:
+            self.current = min(self.current, last) if self.flying else min(1, last)
+        elif marked is not None:
+            self.current = min(marked, last)
+            self._hold_until, self._rtl_descending = None, False  # the item starts again
+        else:
+            self.current = min(self.current, last)
+        if self.current != before:
+            self._hold_until, self._rtl_descending = None, False
+        if len(self.mission) <= int(self.personality.home_is_item0):  # nothing left to fly
+            self.mission_running = False
+        self._jumps.clear()
 
-    def _ack(self, m: Any, result: int, mission_type: int) -> None:
-        self._send(
-            self.mav.mission_ack_encode(
-                m.get_srcSystem(), m.get_srcComponent(), result, mission_type
-            ),
-            reply=True,
-        )
+    def _mission_cleared(self) -> None:
+        self.current = 0
+        self.mission_running = False
+        self._jumps.clear()
 
-    # mission upload (the autopilot drives it)
-    def _on_mission_count(self, m: Any) -> None:
-        if self._upload and self._upload.timer:
-            self._upload.timer.cancel()
-        self._upload = None
-        if self.faults.reject_upload is not None:
-            self._ack(m, self.faults.reject_upload, m.mission_type)
-            return
-        if m.mission_type not in self.stores:
-            self._ack(m, mavlink.MAV_MISSION_UNSUPPORTED, m.mission_type)
-            return
-        if m.count == 0:
-            self._commit(m, [])
-            return
-        self._upload = _Upload(m.mission_type, m.count)
-        self._request(m)
+    def _set_current(self, seq: int) -> bool:
+        if not 0 <= seq < len(self.mission):
+            return False
+        if seq != self.current:
+            self._hold_until, self._rtl_descending = None, False
+        self.current = seq
+        return True
 
-    def _request(self, m: Any) -> None:
-        up = self._upload
-        if up is None:
-            return
-        src, comp = m.get_srcSystem(), m.get_srcComponent()
-        self._send(
-            self.mav.mission_request_int_encode(src, comp, len(up.items), up.mission_type),
-            reply=True,
-        )
-        if up.timer:
-            up.timer.cancel()
-        up.timer = asyncio.get_running_loop().call_later(RETRY_S, self._retry, m)
+    def _on_mission_set_current(self, link: Link, m: Any) -> None:
+        self._set_current(m.seq)
+        self._reply(link, self.mav.mission_current_encode(self.current, len(self.mission), 0, 0))
 
-    def _retry(self, m: Any) -> None:
-        up = self._upload
-        if up is None:
-            return
-        up.tries += 1
-        if up.tries > RETRIES:
-            self._upload = None
-            self._ack(m, mavlink.MAV_MISSION_OPERATION_CANCELLED, up.mission_type)
-            return
-        self._request(m)
-
-    def _on_mission_item_int(self, m: Any) -> None:
-        up = self._upload
-        if up is None or m.mission_type != up.mission_type:
-            return
-        if m.seq == len(up.items):
-            up.items.append(
-                MissionItem(
-                    m.seq,
-                    m.frame,
-                    m.command,
-                    m.current,
-                    m.autocontinue,
-                    m.param1,
-                    m.param2,
-                    m.param3,
-                    m.param4,
-                    m.x,
-                    m.y,
-                    m.z,
-                    m.mission_type,
-                )
-            )
-            up.tries = 0
-        if len(up.items) < up.count:
-            self._request(m)
-            return
-        if up.timer:
-            up.timer.cancel()
-        self._upload = None
-        self._commit(m, up.items)
-
-    def _commit(self, m: Any, items: list[MissionItem]) -> None:
-        """Replace the store at once (never a mix); in flight, continue at the current item."""
-        kind = m.mission_type
-        if self._garbles_left and items:  # a partial/garbled write, caught by read-back
-            self._garbles_left -= 1
-            items = [*items[:-1], items[-1].replace(z=items[-1].z + 1000.0)]
-        self.stores[kind] = [it.replace(seq=i, current=0) for i, it in enumerate(items)]
-        if kind == 0:
-            marked = [it.seq for it in items if it.current]
-            if not self.mission_running:
-                self.current = marked[0] if marked else (1 if self.ardupilot else 0)
-            self.current = min(self.current, max(len(items) - 1, 0))
-            self.uploads_accepted += 1
-        self._ack(m, ACCEPTED, kind)
-        if kind == 0:
-            self._send(self.mav.mission_current_encode(self.current, len(items), 0, 0))
-
-    def _on_mission_clear_all(self, m: Any) -> None:
-        self.stores[m.mission_type] = (
-            [self._home_item()] if (self.ardupilot and m.mission_type == 0) else []
-        )
-        if m.mission_type == 0:
-            self.current = 0
-        self._ack(m, ACCEPTED, m.mission_type)
-
-    def _on_mission_set_current(self, m: Any) -> None:
-        if 0 <= m.seq < len(self.mission):
-            self.current = m.seq
-        self._send(
-            self.mav.mission_current_encode(self.current, len(self.mission), 0, 0), reply=True
+    def _startable(self) -> bool:
+        """Would the firmware fly this mission?  (PX4 denies a take-off at 0,0: "first
+        waypoint too far from home".)"""
+        p = self.personality
+        return bool(self.mission) and not (
+            p.problems(self.mission) or p.start_problems(self.mission)
         )
 
     # commands
-    def _on_command_long(self, m: Any) -> None:
+    def _on_command_long(self, link: Link, m: Any) -> None:
         result = mavlink.MAV_RESULT_ACCEPTED
         command = m.command
+        report_current = False
         if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
             if int(m.param1) == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
-                self._autopilot_version()
+                self._reply(link, wire.autopilot_version(self.mav, self.sysid))
             elif int(m.param1) == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
-                self._home_position()
+                self._reply(link, wire.home_position(self.mav, self.home))
             else:
                 result = mavlink.MAV_RESULT_UNSUPPORTED
         elif command == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
-            self._autopilot_version()
+            self._reply(link, wire.autopilot_version(self.mav, self.sysid))
         elif command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             self.armed = m.param1 == 1
         elif command == mavlink.MAV_CMD_NAV_TAKEOFF:
@@ -409,24 +275,36 @@ class MockAutopilot(asyncio.DatagramProtocol):
                 self._takeoff_alt = 2.5 if math.isnan(m.param7) else float(m.param7) - self.home[2]
                 self.flying = True
         elif command == mavlink.MAV_CMD_MISSION_START:
-            if not self.armed or not self.mission:
+            if not self.armed or not self._startable():
                 result = mavlink.MAV_RESULT_DENIED
             else:
-                self.mission_running = self.flying = True
+                self._start_mission()
         elif command == mavlink.MAV_CMD_DO_SET_MODE:
             result = self._set_mode(m)
-        elif command != mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+        elif command == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT and not self.ardupilot:
+            result = mavlink.MAV_RESULT_UNSUPPORTED  # PX4 v1.16 (measured): the message only
+        elif command == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
+            seq = m.param1
+            keep = seq == -1  # -1: the current item (a reset, index kept)
+            ok = keep or (math.isfinite(seq) and seq == int(seq) and self._set_current(int(seq)))
+            result = mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_DENIED
+            report_current = ok
+        elif command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            if int(m.param1) == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
+                self._reply(link, wire.home_position(self.mav, self.home))
+        else:
             result = mavlink.MAV_RESULT_UNSUPPORTED
-        self._send(
-            self.mav.command_ack_encode(
-                command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()
-            ),
-            reply=True,
+        ack = self.mav.command_ack_encode(
+            command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()
         )
+        self._reply(link, ack)
+        if report_current:
+            self._report_current()
 
     def _set_mode(self, m: Any) -> int:
         """Hold (PX4 AUTO.LOITER, ArduPilot LOITER/BRAKE) pauses the mission where the vehicle
-        is; mission mode (PX4 AUTO.MISSION, ArduPilot AUTO) resumes it.  Others: accepted."""
+        is; mission mode (PX4 AUTO.MISSION, ArduPilot AUTO) resumes it, or is denied when the
+        firmware would not fly the mission.  Other modes: accepted."""
         if self.ardupilot:
             hold, resume = int(m.param2) in (5, 17), int(m.param2) == 3
         else:
@@ -436,50 +314,11 @@ class MockAutopilot(asyncio.DatagramProtocol):
             self.mission_running = False
             self.holding = True
         elif resume and self.armed and self.mission:
-            self.mission_running = self.flying = True
+            if not self._startable():
+                return int(mavlink.MAV_RESULT_DENIED)
+            self._start_mission()
             self.holding = False
         return int(mavlink.MAV_RESULT_ACCEPTED)
-
-    def _autopilot_version(self) -> None:
-        caps = (
-            mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-        )
-        self._send(
-            self.mav.autopilot_version_encode(
-                caps,
-                0x01_0F_00_FF,
-                0,
-                0,
-                0,
-                b"\0" * 8,
-                b"\0" * 8,
-                b"\0" * 8,
-                0,
-                0,
-                self.sysid,
-                [0] * 18,
-            ),
-            reply=True,
-        )
-
-    def _home_position(self) -> None:
-        lat, lon, alt = self.home
-        self._send(
-            self.mav.home_position_encode(
-                round(lat * 1e7),
-                round(lon * 1e7),
-                round(alt * 1000),
-                0,
-                0,
-                0,
-                [1, 0, 0, 0],
-                0,
-                0,
-                0,
-                0,
-            ),
-            reply=True,
-        )
 
     # ------------------------------------------------------------------ flight
 
@@ -496,12 +335,22 @@ class MockAutopilot(asyncio.DatagramProtocol):
             alt = 0.0
         return item.x / 1e7, item.y / 1e7, alt
 
+    def _go_to(self, index: int | None) -> None:
+        if index is None:
+            self.mission_running = False  # end of the mission: hold position (PX4: loiter)
+        else:
+            self.current = index
+        self._report_current()
+
     def _step(self, dt: float) -> None:
         f = self.flight
         target = None
         if self.mission_running and self.current < len(self.mission):
             if self.ardupilot and self.current == 0:  # home is not flown to
                 self.current = 1
+                return
+            if self.mission[self.current].command == DO_JUMP:
+                self._go_to(self._resolve(self.current))
                 return
             target = self._target(self.mission[self.current])
             if target is None:  # an item without a position: done at once
@@ -536,18 +385,22 @@ class MockAutopilot(asyncio.DatagramProtocol):
         if item.command == NAV_RETURN_TO_LAUNCH and not self._rtl_descending:
             self._rtl_descending = True  # over home: now land there
             return
+        self.reached.append(self.current)
         self._send(self.mav.mission_item_reached_encode(self.current))
         if item.command in (NAV_LAND, NAV_RETURN_TO_LAUNCH):
             self.alt, self.armed = 0.0, False
             self.mission_running = self.flying = self._rtl_descending = False
-        elif self.current + 1 < len(self.mission):
-            self.current += 1
+            self._report_current()
         else:
-            self.mission_running = False  # end of the mission: hold position (PX4: loiter)
-        self._send(self.mav.mission_current_encode(self.current, len(self.mission), 0, 0))
+            self._go_to(self._resolve(self.current + 1))
 
     def take_off(self) -> None:
         """Armed, flying the mission from the current item (what arm + MISSION_START do)."""
+        self._start_mission()
+
+    def _start_mission(self) -> None:
+        if not self.flying:  # a new flight: the mission starts again, jump counters too
+            self._jumps.clear()
         self.armed = self.flying = self.mission_running = True
 
     def restart_clock(self, origin: float) -> None:

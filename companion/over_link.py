@@ -28,6 +28,7 @@ from protocol.intersection import Limits
 from protocol.wire import Suite
 
 from .exchange import RunReport, run_alice, serve_bob
+from .flightpath import flight_path
 from .link import (
     PROFILES,
     Channel,
@@ -41,6 +42,8 @@ from .link import (
     run_simulated,
 )
 from .link.frames import OVERHEAD
+from .mission import MissionError
+from .missionfile import read_mission_file
 
 ALICE_NODE, BOB_NODE = 1, 2
 
@@ -258,6 +261,17 @@ def format_link(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def flown_points(path: Path) -> tuple[tuple[int, int], ...]:
+    """The ground path a mission file flies (degE7), from its home: the one model
+    (:mod:`companion.flightpath`) the companion compares in flight.  File errors are
+    :class:`InputFormatError` (exit 2)."""
+    try:
+        mission = read_mission_file(path)
+        return tuple(flight_path(mission.for_autopilot(), mission.home_degE7).points)
+    except MissionError as exc:
+        raise InputFormatError(str(exc)) from exc
+
+
 def compare_over_link(
     alice_file: str | Path,
     bob_file: str | Path,
@@ -277,7 +291,13 @@ def compare_over_link(
         return link_case(case, party, link, impairments, None if seed is None else seed + number)
 
     result = compare(
-        alice_file, bob_file, suite_name, range_=range_, progress=progress, run=over_link
+        alice_file,
+        bob_file,
+        suite_name,
+        range_=range_,
+        progress=progress,
+        run=over_link,
+        read_mission=flown_points,
     )
     result["link"] = {
         "profile": link.name,

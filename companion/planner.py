@@ -1,14 +1,16 @@
 """Altitude-offset planner (pure): fly the flagged segments higher (or lower), nothing else.
 
-Segment k joins vertices k and k+1 (:func:`companion.mission.vertices`).  Every vertex of a
-flagged segment is moved by the offset times the segment's *level* (1 unless several drones
-share the airspace, see :mod:`companion.levels`; a vertex between two flagged segments takes
-the higher level), in the item's own frame (relative, AMSL or terrain: a metre is a metre in
-each).  The item count, the ground track and every item without a position stay exactly as
-they were; ArduPilot's home is never touched.  So the leg before a flagged run climbs, the
-flagged run is flown at the offset altitude, and the first unflagged leg after it descends
-back to the planned altitude.  A limit the offset would break is an error, never a silent
-clip.
+Segment k joins vertices k and k+1 of the flown path (:class:`companion.flightpath.
+FlightPath`).  Every *movable* item at either end of a flagged segment (waypoints and
+loiters) is moved by the offset times the segment's *level* (1 unless several drones share
+the airspace, see :mod:`companion.levels`; an item between two flagged segments takes the
+higher level), in the item's own frame (relative, AMSL or terrain: a metre is a metre in
+each).  Home, take-off, landing, RTL and every item without a position are never moved; the
+item count and the ground track stay exactly as they were.  So the leg before a flagged run
+climbs, the flagged run is flown at the offset altitude, and the first unflagged leg after it
+descends back to the planned altitude.  A leg with no movable end (the launch leg to a
+take-off point, the last leg into a landing) cannot be raised: :func:`fixed_segments` names
+them.  A limit the offset would break is an error, never a silent clip.
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
-from .mission import FRAMES_AMSL, MissionError, MissionItem, vertices
+from .flightpath import FlightPath
+from .mission import FRAMES_AMSL, MissionError, MissionItem
 
 
 class PlannerError(MissionError):
@@ -42,26 +45,33 @@ class OffsetSettings:
         return self.offset_m if self.direction == "up" else -self.offset_m
 
 
+def fixed_segments(path: FlightPath, flagged: Iterable[int]) -> list[int]:
+    """The flagged segments an altitude edit cannot change (no movable item at either end)."""
+    return sorted(k for k in set(flagged) if not path.items_of(k))
+
+
 def plan_offsets(
     items: Sequence[MissionItem],
     flagged: Iterable[int] | Mapping[int, int],
     settings: OffsetSettings | None = None,
     *,
-    ardupilot: bool = False,
+    path: FlightPath,
 ) -> list[MissionItem]:
-    """The edited mission: the vertices of every flagged segment moved by the offset (times
-    the segment's level when ``flagged`` maps segments to levels)."""
+    """The edited mission: the movable items of every flagged segment of ``path`` (the
+    flown path of ``items``) moved by the offset (times the segment's level when
+    ``flagged`` maps segments to levels)."""
     settings = settings or OffsetSettings()
-    v = vertices(items, ardupilot=ardupilot)
     levels = dict(flagged) if isinstance(flagged, Mapping) else dict.fromkeys(flagged, 1)
     segments = sorted(levels)
-    if segments and not 0 <= segments[0] <= segments[-1] < len(v) - 1:
-        raise PlannerError(f"segments {segments} outside 0..{len(v) - 2}")
+    if segments and not 0 <= segments[0] <= segments[-1] < path.segments:
+        raise PlannerError(f"segments {segments} outside 0..{path.segments - 1}")
     if any(level < 1 for level in levels.values()):
         raise PlannerError("levels start at 1")
     moved: dict[int, int] = {}
     for k, level in levels.items():
-        for index in (v[k], v[k + 1]):
+        for index in path.items_of(k):
+            if index >= len(items):
+                raise PlannerError(f"segment {k}: item {index} is not in the mission")
             moved[index] = max(moved.get(index, 0), level)
     out = list(items)
     for index in sorted(moved):

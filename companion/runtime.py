@@ -42,19 +42,21 @@ from .beacon import SIZE as BEACON_SIZE
 from .beacon import Beacon, BeaconError, alice_of
 from .exchange import run_alice, serve_bob
 from .failsafe import Action, FailsafeSettings, at_risk, run_seconds, too_late
+from .flightpath import FlightPath, flight_path
 from .levels import levels_mask, plan_levels
 from .link.arq import LinkError, PeerAborted
 from .link.endpoint import ABORT_PROTOCOL, ABORT_REFUSED, LinkEndpoint
 from .link.frames import OVERHEAD
-from .mission import MissionItem, path_of, point_as_segment, remaining, vertices
+from .mission import MissionError, MissionItem, point_as_segment
 from .peers import FRESH_S, Peer, distance_m, near_cut, time_to_meet
-from .planner import OffsetSettings, PlannerError, plan_offsets
+from .planner import OffsetSettings, PlannerError, fixed_segments, plan_offsets
 from .radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
 
 log = logging.getLogger("companion")
 _JITTER = random.SystemRandom()
 UNKNOWN_SETUP = "unknown OT setup"
 SETUPS_PER_PEER = 2
+POSITION_RATE_HZ = 5.0  # telemetry position updates asked of the autopilot
 NEAR_SLACK_S = 30.0  # the near run reaches this far past the earliest possible meeting
 NEAR_SEGMENTS = 2  # and each side compares at least its next two segments
 BOB_GUESS = 4  # Bob's size before he tells it: a remaining route of a few legs (m x m would
@@ -92,12 +94,20 @@ class Event:
     detail: dict[str, Any]
 
 
-def mission_version(items: list[MissionItem], ardupilot: bool) -> int:
+def mission_version(path: FlightPath) -> int:
     """16-bit digest of the ground track: altitude edits do not change it."""
     import hashlib
 
-    digest = hashlib.sha256(repr(path_of(items, ardupilot=ardupilot)).encode()).digest()
+    digest = hashlib.sha256(repr(path.points).encode()).digest()
     return int.from_bytes(digest[:2], "big")
+
+
+def same_track(a: list[MissionItem], b: list[MissionItem]) -> bool:
+    """The same items in the same places (altitudes and the current mark aside)."""
+    return len(a) == len(b) and all(
+        (x.command, x.x, x.y, x.mission_type) == (y.command, y.x, y.y, y.mission_type)
+        for x, y in zip(a, b, strict=True)
+    )
 
 
 def box_radius_m(path: list[tuple[int, int]], centre: tuple[int, int], minimum: float) -> float:
@@ -127,6 +137,8 @@ class Companion:
         self.events: list[Event] = []
         self.original: list[MissionItem] = []
         self.mission: list[MissionItem] = []
+        self.home: tuple[int, int, float] | None = None  # lat, lon degE7, alt AMSL
+        self.path = FlightPath(())  # the flown ground path of the original mission
         self.levels: dict[int, int] = {}  # segment -> altitude level, as uploaded
         self.flagged: set[int] = set()  # segments the comparisons found in conflict
         self.precaution: dict[int, set[int]] = {}  # peer -> segments climbed as a precaution
@@ -158,10 +170,18 @@ class Companion:
         self.epoch = self.clock.now()
         self.original = await self.autopilot.download()
         self.mission = list(self.original)
+        if not self.settings.ardupilot:  # ArduPilot's home is item 0 of the mission
+            self.home = await self.autopilot.home()
+        home = None if self.home is None else self.home[:2]
+        try:
+            self.path = flight_path(self.mission, home, ardupilot=self.settings.ardupilot)
+        except MissionError as exc:  # e.g. a DO_JUMP to nowhere: fly, but compare nothing
+            self.record("mission_invalid", error=str(exc))
         self.record(
             "mission",
             items=len(self.mission),
-            segments=max(len(vertices(self.mission, ardupilot=self.settings.ardupilot)) - 1, 0),
+            segments=self.path.segments,
+            home=self.home is not None or self.settings.ardupilot,
         )
         await self.endpoint.start()
         self._tasks = [
@@ -209,7 +229,7 @@ class Companion:
 
     @property
     def version(self) -> int:
-        return mission_version(self.mission, self.settings.ardupilot)
+        return mission_version(self.path)
 
     # ------------------------------------------------------------------ vehicle state
 
@@ -219,6 +239,12 @@ class Companion:
         telemetry = TelemetryAsync(self.autopilot.system)
         last: tuple[float, tuple[int, int]] | None = None
         try:
+            # PX4 sends GLOBAL_POSITION_INT at 50 Hz on the onboard link (500 Hz in SITL at
+            # 10x); a few per second is plenty here and keeps MAVSDK's callbacks keeping up
+            try:
+                await asyncio.wait_for(telemetry.set_rate_position(POSITION_RATE_HZ), 5.0)
+            except Exception as exc:  # any MAVSDK error: keep the default rate
+                log.info("position rate unchanged: %s", exc)
             async for p in telemetry.subscribe_position():
                 self.position = (
                     round(p.latitude_deg * 1e7),
@@ -444,11 +470,8 @@ class Companion:
     # ------------------------------------------------------------------ Alice
 
     def _remaining_path(self) -> tuple[int, list[tuple[int, int]]]:
-        ap = self.settings.ardupilot
-        start = (
-            remaining(self.mission, self.current_item, ardupilot=ap) if not self.on_ground else 0
-        )
-        return start, path_of(self.mission, ardupilot=ap)[start:]
+        start = self.path.start_at(self.current_item) if not self.on_ground else 0
+        return start, self.path.points[start:]
 
     def _horizon_m(self, peer: Peer, path: list[tuple[int, int]]) -> int:
         """How far ahead the near run looks: long enough that what lies beyond can wait for
@@ -528,8 +551,8 @@ class Companion:
                 time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
             )
             if too_late(needed, meet, self.settings.failsafe):
-                await self._precaution(peer, start, path, needed, meet)
-            watchdog = asyncio.create_task(self._watch(peer, start, path, alice, grid, needed))
+                await self._precaution(peer, needed, meet)
+            watchdog = asyncio.create_task(self._watch(peer, alice, grid, needed))
             self._sessions += 1
             try:
                 report = await run_alice(
@@ -601,8 +624,6 @@ class Companion:
     async def _watch(
         self,
         peer: Peer,
-        start: int,
-        path: list[tuple[int, int]],
         alice: Alice,
         grid: GridSpec,
         needed: float,
@@ -625,7 +646,7 @@ class Companion:
             # as it has overrun, so the fail-safe does not wait for the last seconds.
             left = max(abs(deadline - self.clock.now()), 2.0)
             if too_late(left, self._urgency(peer), self.settings.failsafe):
-                await self._precaution(peer, start, path, left, self._urgency(peer))
+                await self._precaution(peer, left, self._urgency(peer))
                 return
 
     async def _guard(self) -> None:
@@ -642,7 +663,7 @@ class Companion:
             for peer in list(self.peers.values()):
                 if peer.node == running or peer.node in self.precaution or not self._pending(peer):
                     continue
-                start, path = self._remaining_path()
+                _, path = self._remaining_path()
                 if len(path) < 2:
                     break
                 first = self._near(path, 1)  # the least a run compares
@@ -654,21 +675,18 @@ class Companion:
                 )
                 meet = self._urgency(peer)
                 if too_late(needed, meet, self.settings.failsafe):
-                    await self._precaution(peer, start, path, needed, meet, waiting=True)
+                    await self._precaution(peer, needed, meet, waiting=True)
 
     async def _precaution(
-        self,
-        peer: Peer,
-        start: int,
-        path: list[tuple[int, int]],
-        needed: float,
-        meet: float,
-        *,
-        waiting: bool = False,
+        self, peer: Peer, needed: float, meet: float, *, waiting: bool = False
     ) -> None:
+        """Climb over (or hold before) the segments both drones may reach before the result.
+        The path is what is left to fly *now*: a run's path starts where the drone was when
+        it began, and distances from here along legs already flown would come out wrong."""
         settings = self.settings.failsafe
         if peer.node in self.precaution or peer.node in self._holding or self.on_ground:
             return  # (on the ground the drone waits for its comparisons anyway)
+        start, path = self._remaining_path()
         speed = max(self.speed_m_s, self.settings.cruise_m_s)
         risky = at_risk(
             path, start, self._here(), speed, peer.position, self._peer_speed(peer), needed,
@@ -681,6 +699,7 @@ class Companion:
             peer=peer.node,
             action=settings.action.value,
             segments=risky,
+            first_segment=start,
             needed_s=round(needed, 1),
             time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
             waiting=waiting,  # no run under way with this peer yet (queued, or a retry)
@@ -697,8 +716,9 @@ class Companion:
 
     async def _hold_before(self, peer: int, segment: int) -> None:
         """Pause the mission once the vehicle reaches the start of ``segment``."""
-        items = vertices(self.mission, ardupilot=self.settings.ardupilot)
-        gate = items[segment + 1] if segment + 1 < len(items) else items[-1]
+        vs = self.path.vertices
+        end = vs[min(segment + 1, len(vs) - 1)]
+        gate = min(end.items, default=0)  # the segment is flown once its end item is current
         while peer in self._holding and self.current_item < gate:
             await self.clock.sleep(0.5)
         if peer not in self._holding:
@@ -732,19 +752,29 @@ class Companion:
             if levels == self.levels:
                 return
             try:
-                new = plan_offsets(
-                    self.original, levels, self.settings.offset, ardupilot=self.settings.ardupilot
-                )
+                planned = plan_offsets(self.original, levels, self.settings.offset, path=self.path)
             except PlannerError as exc:
                 self.record("plan_failed", error=str(exc))
                 return
-            # Keep the item the vehicle is flying: an upload must not restart the mission.
-            current = min(self.current_item, len(new) - 1)
-            new = [it.replace(current=int(i == current)) for i, it in enumerate(new)]
+            fixed = fixed_segments(self.path, levels)
+            if fixed:  # e.g. the launch leg to a take-off point: nothing there may move
+                self.record("fixed_segments", segments=fixed, why=why)
             try:
+                # The edit is built on what the vehicle holds now and keeps the item it is
+                # flying: PX4 restarts a mission at the item an upload marks current.
                 held = await self.autopilot.download()
+                if not same_track(held, self.original):
+                    raise AutopilotError("the vehicle's mission changed since the start")
+                current = max(
+                    self.current_item, next((i for i, it in enumerate(held) if it.current), 0)
+                )
+                current = min(current, len(held) - 1)
+                new = [
+                    h.replace(z=p.z, current=int(i == current))
+                    for i, (h, p) in enumerate(zip(held, planned, strict=True))
+                ]
                 await self.autopilot.replace_mission(new, held)
-            except AutopilotError as exc:
+            except (AutopilotError, MissionError) as exc:
                 self.record("upload_failed", error=str(exc))
                 return
             announce = levels_mask(levels) != levels_mask(self.levels)

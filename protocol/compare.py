@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .formats import InputFormatError, parse_paper_text, parse_plan, read_text
+from .formats import InputFormatError, parse_paper_text, read_text
 from .geometry import Point, path_hits
 from .grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
 from .intersection import Alice, Bob, BobKeys, Limits
@@ -62,8 +62,22 @@ class Case:
         )
 
 
-def _is_plan(path: str | Path, text: str) -> bool:
-    return str(path).endswith(".plan") or text.lstrip().startswith("{")
+GeoPath = tuple[tuple[int, int], ...]
+# Reads a mission file into the ground path its autopilot flies (degE7); the companion's
+# ``companion.flightpath`` knows how (launch leg, loiters, DO_JUMP, RTL), this package does not.
+MissionReader = Callable[[Path], GeoPath]
+
+
+def grid_holds(lat: int, lon: int, radius_m: float, points: GeoPath) -> bool:
+    """Does the grid of ``radius_m`` around (lat, lon) hold every point?"""
+    grid = GridSpec.geo(lat, lon, radius_m=radius_m)
+    return all(max(map(abs, grid.project(*p, checked=False))) <= grid.range for p in points)
+
+
+def is_mission_file(path: str | Path, text: str) -> bool:
+    """A QGroundControl ``.plan`` (JSON) or ``QGC WPL`` file rather than the paper's format."""
+    head = text.lstrip()
+    return str(path).endswith((".plan", ".waypoints")) or head.startswith(("{", "QGC WPL"))
 
 
 def load_cases(
@@ -73,19 +87,33 @@ def load_cases(
     range_: int | None = None,
     resolution_mm: int = DEFAULT_RESOLUTION_MM,
     radius_m: float = DEFAULT_RADIUS_M,
+    read_mission: MissionReader | None = None,
 ) -> list[Case]:
-    """Pair line k of ALICE with line k of BOB (paper format) or two plans (one case)."""
+    """Pair line k of ALICE with line k of BOB (paper format) or two mission files (one
+    case, their flown paths as ``read_mission`` gives them; the grid is centred on Alice's
+    first point and wide enough for both paths)."""
     a_text, b_text = read_text(alice_file), read_text(bob_file)
-    a_plan, b_plan = _is_plan(alice_file, a_text), _is_plan(bob_file, b_text)
+    a_plan, b_plan = is_mission_file(alice_file, a_text), is_mission_file(bob_file, b_text)
     if a_plan != b_plan:
-        raise InputFormatError("both files must be plans, or both in the paper's format")
+        raise InputFormatError("both files must be missions, or both in the paper's format")
     if a_plan:
-        a_geo, b_geo = parse_plan(a_text, str(alice_file)), parse_plan(b_text, str(bob_file))
+        if read_mission is None:
+            raise InputFormatError(
+                f"{alice_file}: mission files are compared as the autopilot flies them by "
+                "`python -m companion compare` (this command reads the paper's format)"
+            )
+        a_geo, b_geo = read_mission(Path(alice_file)), read_mission(Path(bob_file))
+        for path, geo in ((alice_file, a_geo), (bob_file, b_geo)):
+            if len(geo) < 2:
+                raise InputFormatError(f"{path}: the mission flies no segment")
         lat, lon = a_geo[0]
         if range_ is not None:
             grid = GridSpec(GridKind.GEO, range_, lat, lon, resolution_mm)
         else:
-            grid = GridSpec.geo(lat, lon, resolution_mm=resolution_mm, radius_m=radius_m)
+            radius = radius_m
+            while not grid_holds(lat, lon, radius, a_geo + b_geo):
+                radius *= 2
+            grid = GridSpec.geo(lat, lon, resolution_mm=resolution_mm, radius_m=radius)
         return [Case(grid.project_path(a_geo), tuple(b_geo), grid, bob_geographic=True)]
     a_cases = parse_paper_text(a_text, str(alice_file))
     b_cases = parse_paper_text(b_text, str(bob_file))
@@ -179,10 +207,11 @@ def compare(
     range_: int | None = None,
     progress: bool = False,
     run: Callable[[Case, Party], dict[str, Any]] = run_case,
+    read_mission: MissionReader | None = None,
 ) -> dict[str, Any]:
     """Everything ``compare --json`` prints; ``run`` carries one case (in memory by default,
     the companion passes one that goes through the simulated radio)."""
-    cases = load_cases(alice_file, bob_file, range_=range_)
+    cases = load_cases(alice_file, bob_file, range_=range_, read_mission=read_mission)
     party = Party.generate(SUITES[suite_name])
     results = []
     for number, case in enumerate(cases, start=1):

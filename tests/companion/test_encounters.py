@@ -11,13 +11,14 @@ import pytest
 
 from companion.beacon import Beacon, BeaconError
 from companion.failsafe import FailsafeSettings, at_risk, run_seconds, too_late
+from companion.flightpath import flight_path
 from companion.levels import assign, levels_mask, plan_levels
 from companion.link import PROFILES, Impairments
 from companion.link.airtime import DutyCycle
 from companion.link.clock import Clock, run_simulated
 from companion.link.endpoint import LinkEndpoint
 from companion.link.medium import SimMedium
-from companion.mission import MissionItem, path_of
+from companion.mission import MissionItem
 from companion.missionfile import read_plan
 from companion.over_link import link_case
 from companion.peers import (
@@ -165,8 +166,9 @@ def test_precautions_take_levels_like_conflicts() -> None:
 
 def test_planner_levels() -> None:
     items = survey(6)
-    one = plan_offsets(items, {1: 1})
-    two = plan_offsets(items, {1: 2, 2: 1})
+    path = flight_path(items, None)
+    one = plan_offsets(items, {1: 1}, path=path)
+    two = plan_offsets(items, {1: 2, 2: 1}, path=path)
     deltas_one = [b.z - a.z for a, b in zip(items, one, strict=True)]
     deltas_two = [b.z - a.z for a, b in zip(items, two, strict=True)]
     assert sorted(set(deltas_one)) == [0.0, 10.0]
@@ -258,7 +260,7 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
     Idle, a first run with 2 could still end in time: nothing to do.  Busy for 100 s, even
     the smallest run with 2 would be late: the guard climbs over the crossing leg for 2
     without waiting for a run, and says so (``waiting``)."""
-    items, _ = read_plan(SCENARIOS / "inflight_east.plan")  # -600, -250, 250, 600 m east
+    items, _ = read_plan(SCENARIOS / "inflight_east.plan")  # -600, -250, 250 m east, land 635
 
     async def main() -> tuple[Companion, _Autopilot]:
         clock = Clock()
@@ -266,8 +268,9 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
         autopilot = _Autopilot(items)
         c = Companion(CompanionSettings(node=1, autopilot_url=""), endpoint, autopilot)  # type: ignore[arg-type]
         c.original = c.mission = list(items)
+        c.path = flight_path(items, None)
         c.relative_alt, c.current_item, c.speed_m_s = 30.0, 2, 10.0  # airborne, segment 0
-        (lat, west), (_, east_) = path_of(items)[:2]  # -600 and -250 m: half-way, flying east
+        (lat, west), (_, east_) = c.path.points[:2]  # -600 and -250 m: half-way, flying east
         c.position = (lat, (west + east_) // 2, 518.0)
         south = (C_LAT - round(800 / M_PER_E7_LAT), C_LON)
         c.peers[2] = Peer(2, beacon(south), heard_at=clock.now())
@@ -286,3 +289,34 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
     assert event.detail["waiting"] and event.detail["peer"] == 2
     assert 1 in event.detail["segments"]  # the leg over the crossing
     assert companion.levels.get(1) == 1 and autopilot.uploads  # climbed, one level
+
+
+def test_edit_is_built_on_the_held_mission_and_keeps_the_current_item() -> None:
+    """In flight on item 2, an edit keeps item 2 current (PX4 restarts a mission at the item
+    an upload marks current) and is built on what the vehicle holds (PX4 reads frame 3 back
+    as 6 and zeroes parameters): only the altitudes of the flagged legs change; a vehicle
+    whose mission changed under us is not edited."""
+    from companion.autopilots import PX4
+
+    items = [it.replace(frame=3) for it in survey(6)]
+    held = [PX4.stored(it) for it in items]
+
+    async def main(vehicle: list[MissionItem]) -> tuple[Companion, _Autopilot]:
+        clock = Clock()
+        endpoint = LinkEndpoint(1, SimMedium(clock=clock).attach(1), PROFILES["us915-sf7"])
+        autopilot = _Autopilot(vehicle)
+        c = Companion(CompanionSettings(node=1, autopilot_url=""), endpoint, autopilot)  # type: ignore[arg-type]
+        c.original = c.mission = list(items)
+        c.path = flight_path(items, None)
+        c.relative_alt, c.current_item = 30.0, 2
+        c.precaution[2] = {2}
+        await c._replan("test")
+        return c, autopilot
+
+    _, autopilot = run_simulated(main(held))
+    (new,) = autopilot.uploads
+    assert [it.current for it in new] == [0, 0, 1, 0, 0, 0]
+    assert [it.frame for it in new] == [h.frame for h in held]  # the vehicle's own items
+    assert [b.z - a.z for a, b in zip(items, new, strict=True)] == [0, 0, 10, 10, 0, 0]
+    moved = run_simulated(main([h.replace(x=h.x + 100) for h in held]))[0]
+    assert [e.kind for e in moved.events][-1] == "upload_failed"

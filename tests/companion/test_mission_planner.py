@@ -8,16 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from companion.mission import (
-    MissionError,
-    MissionItem,
-    normalise,
-    path_of,
-    remaining,
-    segments,
-    vertices,
-)
-from companion.planner import OffsetSettings, PlannerError, plan_offsets
+from companion.flightpath import MOVABLE, flight_path
+from companion.mission import MissionError, MissionItem, normalise
+from companion.planner import OffsetSettings, PlannerError, fixed_segments, plan_offsets
 
 from .missions import HOME, item
 
@@ -39,64 +32,56 @@ def missions(draw: st.DrawFn) -> list[MissionItem]:
     return out
 
 
+HOME_E7 = (round(HOME[0] * 1e7), round(HOME[1] * 1e7))
+
+
 @settings(max_examples=300, deadline=None)
 @given(missions(), st.data(), st.booleans())
 def test_planner_properties(items: list[MissionItem], data: st.DataObject, ardupilot: bool) -> None:
-    v = vertices(items, ardupilot=ardupilot)
-    nseg = max(len(v) - 1, 0)
+    path = flight_path(items, HOME_E7, ardupilot=ardupilot)
+    nseg = path.segments
     flagged = data.draw(st.sets(st.integers(0, nseg - 1))) if nseg else set()
     s = OffsetSettings(offset_m=10.0, max_altitude_m=200.0)
-    out = plan_offsets(items, flagged, s, ardupilot=ardupilot)
+    out = plan_offsets(items, flagged, s, path=path)
     assert len(out) == len(items)
-    moved = {v[k] for k in flagged} | {v[k + 1] for k in flagged}
+    moved = {i for k in flagged for i in path.items_of(k)}
     for index, (a, b) in enumerate(zip(items, out, strict=True)):
         # ground track, frames, commands and every non-positional item unchanged
         assert (a.x, a.y, a.frame, a.command, a.seq) == (b.x, b.y, b.frame, b.command, b.seq)
         if index in moved:
+            assert a.command in MOVABLE  # take-off, landing, RTL and DO_ items never move
             assert b.z == pytest.approx(a.z + 10.0)
         else:
             assert a.same_as(b)
-    for k, (i, j) in enumerate(segments(out, ardupilot=ardupilot)):
-        if k in flagged:  # flown at the offset altitude
-            assert (out[i].z, out[j].z) == pytest.approx((items[i].z + 10, items[j].z + 10))
-        elif k - 1 in flagged and k + 1 not in flagged:  # first unflagged: back down at its end
-            assert out[j].z == items[j].z
+    vs = path.vertices
+    for k in range(nseg):
+        ends = [i for v in (vs[k], vs[k + 1]) for i in v.moves]
+        if k in flagged:  # every movable end flown at the offset altitude
+            assert all(out[i].z == pytest.approx(items[i].z + 10) for i in ends)
         elif k - 1 not in flagged and k + 1 not in flagged:  # unflagged: at planned altitude
-            assert (out[i].z, out[j].z) == (items[i].z, items[j].z)
+            assert all(out[i].z == items[i].z for i in ends if i not in moved)
+    assert set(fixed_segments(path, flagged)) == {k for k in flagged if not path.items_of(k)}
     if ardupilot:
         assert out[0] == items[0]
 
 
-def test_vertices_skip_items_without_position_and_ardupilot_home() -> None:
-    items = [
-        item(0, 16, *HOME[:2], alt=HOME[2], frame=0),  # ArduPilot home
-        item(1, 22, alt=20.0),  # takeoff here: no position
-        item(2, 16, 47.398, 8.546),
-        item(3, 178, frame=2, param1=8.0),  # speed change
-        item(4, 19, 47.399, 8.546),  # loiter time at a position
-        item(5, 21, 47.399, 8.547, alt=0.0),  # land at a position
-        item(6, 20, frame=2),  # RTL
-    ]
-    assert vertices(items, ardupilot=True) == [2, 4, 5]
-    assert vertices(items) == [0, 2, 4, 5]
-    assert segments(items, ardupilot=True) == [(2, 4), (4, 5)]
-    assert path_of(items, ardupilot=True)[0] == (473980000, 85460000)
-    assert remaining(items, 4, ardupilot=True) == 0  # flying towards item 4: segment 0
-    assert remaining(items, 5, ardupilot=True) == 1
-
-
 def test_limits_are_errors_not_clips() -> None:
     items = [item(0, 16, 47.398, 8.546, 115.0), item(1, 16, 47.399, 8.546, 30.0)]
+    path = flight_path(items, None)
+
+    def plan(items: list[MissionItem], flagged: set[int], s: OffsetSettings) -> list[MissionItem]:
+        return plan_offsets(items, flagged, s, path=flight_path(items, None))
+
     with pytest.raises(PlannerError, match="above the maximum altitude 120"):
-        plan_offsets(items, {0}, OffsetSettings(max_altitude_m=120.0))
+        plan(items, {0}, OffsetSettings(max_altitude_m=120.0))
     with pytest.raises(PlannerError, match="below the minimum"):
-        plan_offsets(items, {0}, OffsetSettings(direction="down", offset_m=30.0))
+        plan(items, {0}, OffsetSettings(direction="down", offset_m=30.0))
     with pytest.raises(PlannerError, match="outside"):
-        plan_offsets(items, {1}, OffsetSettings())
+        plan_offsets(items, {1}, OffsetSettings(), path=path)
     amsl = [item(0, 16, 47.398, 8.546, 600.0, frame=0), item(1, 16, 47.399, 8.546, 600.0, 0)]
-    assert plan_offsets(amsl, {0})[0].z == 610.0  # AMSL: no height limit unless given
+    assert plan(amsl, {0}, OffsetSettings())[0].z == 610.0  # AMSL: no height limit unless given
     with pytest.raises(PlannerError, match="AMSL"):
-        plan_offsets(amsl, {0}, OffsetSettings(max_altitude_amsl_m=605.0))
+        plan(amsl, {0}, OffsetSettings(max_altitude_amsl_m=605.0))
     with pytest.raises(PlannerError):
         OffsetSettings(offset_m=-1)
 

@@ -10,16 +10,20 @@ from pathlib import Path
 
 import pytest
 
+from companion.flightpath import MOVABLE, flight_path
 from companion.mission import MissionError
 from companion.missionfile import (
     format_plan,
     format_wpl,
+    parse_plan_file,
     parse_plan_items,
     parse_wpl,
     read_mission,
+    read_mission_file,
     write_plan,
     write_wpl,
 )
+from companion.planner import plan_offsets
 
 from .missions import HOME, survey
 
@@ -28,7 +32,7 @@ def test_round_trips(tmp_path: Path) -> None:
     items = survey(23)
     items[0] = items[0].replace(current=1)
     write_plan(tmp_path / "m.plan", items, HOME)
-    write_wpl(tmp_path / "m.txt", items)
+    write_wpl(tmp_path / "m.txt", items, HOME)
     for name in ("m.plan", "m.txt"):
         back = read_mission(tmp_path / name)
         assert len(back) == len(items)
@@ -65,7 +69,11 @@ def test_plan_errors_name_the_item(mutate, message: str) -> None:  # type: ignor
         ("QGC WPL 100\n", "line 1"),
         ("QGC WPL 110\n0\t1\t0\t16\n", "line 2: expected 12 fields"),
         ("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\tx\t8.5\t30\t1\n", "line 2"),
-        ("QGC WPL 110\n1\t1\t0\t16\t0\t0\t0\t0\t47.3\t8.5\t30\t1\n", "sequence number 1"),
+        (
+            "QGC WPL 110\n1\t1\t0\t16\t0\t0\t0\t0\t47.3\t8.5\t30\t1\n"
+            "1\t0\t3\t16\t0\t0\t0\t0\t47.3\t8.5\t30\t1\n",
+            "sequence number 1 after 1",
+        ),
         ("QGC WPL 110\n0\t1\t42\t16\t0\t0\t0\t0\t47.3\t8.5\t30\t1\n", "unknown frame"),
     ],
 )
@@ -76,7 +84,7 @@ def test_wpl_errors_name_the_line(text: str, message: str) -> None:
 
 def test_mission_show_cli(tmp_path: Path) -> None:
     path = tmp_path / "m.txt"
-    path.write_text(format_wpl(survey(7)))
+    path.write_text(format_wpl(survey(7), HOME))
     run = subprocess.run(
         [sys.executable, "-m", "companion", "mission", "show", str(path)],
         capture_output=True,
@@ -84,7 +92,9 @@ def test_mission_show_cli(tmp_path: Path) -> None:
         timeout=60,
     )
     assert run.returncode == 0, run.stderr
-    assert "segment 0: item 0 -> item 1" in run.stdout and "DO_CHANGE_SPEED" in run.stdout
+    # item 0 stands at home: the launch leg is home -> item 1
+    assert "segment 0: home (item 0) -> position (item 1)" in run.stdout
+    assert "DO_CHANGE_SPEED" in run.stdout
     bad = tmp_path / "bad.txt"
     bad.write_text("QGC WPL 110\n0\t1\n")
     run = subprocess.run(
@@ -94,3 +104,106 @@ def test_mission_show_cli(tmp_path: Path) -> None:
         timeout=60,
     )
     assert run.returncode == 2 and "line 2" in run.stderr
+
+
+# ---------------------------------------------------------------- missions as others write them
+
+FILES = Path(__file__).parent / "mission_files"
+TAKEOFF, LAND, RTL, LOITER_TO_ALT = 22, 21, 20, 31
+
+
+@pytest.mark.parametrize(
+    ("name", "ardupilot", "n_items", "n_vertices", "kinds"),
+    [
+        # take-off at home merges with home; three waypoints; RTL back home
+        ("px4_takeoff_rtl.plan", False, 5, 5, "HPPPH"),
+        # the patrol loop once more and the leg back to its start, then the landing
+        ("patrol_do_jump.plan", False, 6, 7, "HPPPPPP"),
+        # take-off point, waypoint, an 80 m loiter circle and a 120 m loiter (as polygons)
+        (
+            "loiters_fixed_wing.plan",
+            False,
+            4,
+            25,
+            "HPP" + "P" + "L" * 9 + "P" + "P" + "L" * 9 + "P",
+        ),
+        ("terrain_frame.plan", True, 5, 4, "HPPH"),
+        # QGC's generated survey items are flown: 12 waypoints between home and home
+        ("survey_complex.plan", False, 16, 14, "H" + "P" * 12 + "H"),
+        # a structure scan: entrance, two closed rings, exit
+        ("structure_scan.plan", False, 14, 11, "H" + "P" * 9 + "H"),
+        ("fw_landing_pattern.plan", False, 5, 15, "HPP" + "P" + "L" * 9 + "P" + "P"),
+        ("ardupilot_home.waypoints", True, 6, 5, "HPPPH"),
+        ("commented_from_one.waypoints", False, 3, 3, "HPP"),
+    ],
+)
+def test_real_mission_files_fly_their_whole_path(
+    name: str, ardupilot: bool, n_items: int, n_vertices: int, kinds: str
+) -> None:
+    plan = read_mission_file(FILES / name)
+    items = plan.for_autopilot(ardupilot=ardupilot)
+    assert len(items) == n_items
+    path = flight_path(items, plan.home_degE7, ardupilot=ardupilot)
+    assert len(path.vertices) == n_vertices
+    assert "".join(v.kind.name[0] for v in path.vertices) == kinds
+    assert path.points[0] == plan.home_degE7  # the launch leg starts at home
+    # raise everything: waypoints and loiters move, take-off, landing, RTL, DO_ and home never
+    out = plan_offsets(items, range(path.segments), path=path)
+    for a, b in zip(items, out, strict=True):
+        if a.command in MOVABLE and a.has_position and not (ardupilot and a.seq == 0):
+            assert b.z == a.z + 10.0, a
+        else:
+            assert b == a, a
+    assert all(math.isfinite(it.z) for it in items)
+
+
+def test_home_of_a_wpl_is_its_first_item() -> None:
+    plan = read_mission_file(FILES / "ardupilot_home.waypoints")
+    assert plan.home == pytest.approx((HOME[0], HOME[1], HOME[2]))
+    assert plan.items[0].command == TAKEOFF  # item 0 of the mission, home excluded
+    assert [it.seq for it in plan.for_autopilot(ardupilot=True)] == list(range(6))
+    assert read_mission_file(FILES / "commented_from_one.waypoints").items[-1].command == LAND
+
+
+def test_plan_home_is_not_the_takeoff_item_on_ardupilot() -> None:
+    plan = read_mission_file(FILES / "px4_takeoff_rtl.plan")
+    items = plan.for_autopilot(ardupilot=True)
+    assert items[0].command == 16 and (items[0].x, items[0].y) == plan.home_degE7
+    assert items[1].command == TAKEOFF
+
+
+def test_null_altitude_is_an_error_not_zero() -> None:
+    with pytest.raises(MissionError, match=r"mission item 1: altitude is null \(QGroundControl"):
+        read_mission_file(FILES / "terrain_null_altitude.plan")
+
+
+def test_waypoint_without_position_is_an_error() -> None:
+    doc = json.loads((FILES / "px4_takeoff_rtl.plan").read_text())
+    doc["mission"]["items"][2]["params"][4] = None
+    with pytest.raises(MissionError, match="item 2: command 16 needs a latitude"):
+        parse_plan_file(json.dumps(doc))
+
+
+def test_structure_scan_ring_is_outside_the_structure() -> None:
+    items = read_mission_file(FILES / "structure_scan.plan").items
+    ring = [(it.x, it.y) for it in items[2:6]]  # the first layer's corners
+    lat0 = HOME[0]
+    k_e = 111_195.0 * math.cos(math.radians(lat0))
+    corners = sorted(
+        (round((x / 1e7 - HOME[0]) * 111_195.0), round((y / 1e7 - HOME[1]) * k_e)) for x, y in ring
+    )
+    # the 60 m square at 200..260 m pushed 20 m out: 180..280 m
+    assert corners == [(180, 180), (180, 280), (280, 180), (280, 280)]
+    assert {it.z for it in items[1:-2]} == {17.5, 32.5, 40.0}  # layer middles and entrance
+
+
+def test_px4_refuses_what_it_cannot_fly_before_upload() -> None:
+    from companion.autopilots import ARDUPILOT, PX4
+
+    plan = read_mission_file(FILES / "terrain_frame.plan")
+    assert any("frame 10" in p for p in PX4.problems(plan.items))
+    assert not ARDUPILOT.problems(plan.for_autopilot(ardupilot=True))
+    wpl = read_mission_file(FILES / "ardupilot_home.waypoints")
+    assert any("0,0" in p for p in PX4.start_problems(wpl.items))  # take-off "here"
+    px4 = wpl.for_autopilot()  # for PX4 the take-off gets home's position
+    assert not PX4.start_problems(px4) and (px4[0].x, px4[0].y) == wpl.home_degE7

@@ -83,3 +83,35 @@ def test_bench_link_rows() -> None:
         assert row["frames_sent"] > paper[key]["frames_sent"]
     table = format_link(result)
     assert "| us915-sf9 | 30% | paper pair | 30/30 |" in table
+
+
+def test_compare_mission_files_as_they_are_flown(tmp_path: Path) -> None:
+    """Two mission files are compared on their flown paths: Bob's line crosses only Alice's
+    launch leg (home -> first waypoint) and her RTL leg, which a positions-only reader misses."""
+    from companion.missionfile import write_wpl
+
+    from .missions import item
+
+    home = (47.3970, 8.5450, 488.0)
+    alice = [item(0, 16, 47.3990, 8.5450, 30.0), item(1, 16, 47.3990, 8.5480), item(2, 20, frame=2)]
+    bob = [item(0, 16, 47.3980, 8.5430, 40.0), item(1, 16, 47.3980, 8.5440, 40.0)]
+    a, b = tmp_path / "alice.waypoints", tmp_path / "bob.waypoints"
+    write_wpl(a, alice, home)
+    write_wpl(b, bob, (47.3980, 8.5420, 488.0))  # Bob: home west, east to 8.5440 ...
+    result = run_cli("compare", str(a), str(b), "--link", "ideal", "--json")
+    assert result.returncode == 0, result.stderr
+    (case,) = json.loads(result.stdout)["cases"]
+    # Alice flies home -> wp0 (north), wp0 -> wp1 (east), wp1 -> home (RTL): Bob's line
+    # (lat 47.3980 from 8.5420 to 8.5440) stays west of her launch leg at 8.5450
+    assert case["hits"] == case["plain_hits"] == [False, False, False]
+    write_wpl(b, [*bob, item(2, 16, 47.3980, 8.5490, 40.0)], (47.3980, 8.5420, 488.0))
+    result = run_cli("compare", str(a), str(b), "--link", "ideal", "--json")
+    (case,) = json.loads(result.stdout)["cases"]
+    assert case["hits"] == case["plain_hits"] == [True, False, True]  # launch and RTL legs
+    refused = subprocess.run(
+        [sys.executable, "-m", "protocol", "compare", str(a), str(b)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert refused.returncode == 2 and "python -m companion compare" in refused.stderr

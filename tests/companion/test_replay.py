@@ -16,12 +16,12 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.failsafe import Action
 from companion.mock_autopilot import Faults
 from companion.replay import (
-    RESOLVED_TOLERANCE_M,
     Scenario,
     ScenarioError,
     load_scenario,
     run_replay,
 )
+from companion.replay_vehicles import RESOLVED_TOLERANCE_M
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "sitl_configs" / "scenarios"
 
@@ -181,7 +181,8 @@ def test_fault_link_at_30_percent_loss() -> None:
     scenario = _drone(_drone(scenario, 2, mission=longer), 1, takeoff_delay_s=400.0)
     report = asyncio.run(run_replay(scenario)).report
     alice = report["drones"][0]
-    assert alice["flagged_segments"] == alice["conflicting_segments"] == [0]
+    # segment 0 is the 7.5 m launch leg from home to the first waypoint; 1 crosses
+    assert alice["flagged_segments"] == alice["conflicting_segments"] == [1]
     assert alice["vehicle_holds"] == "edited"
     assert report["conflicts_resolved"] == report["conflicts"] == 1
 
@@ -201,7 +202,7 @@ def test_failsafe_climbs_when_the_result_cannot_arrive_in_time() -> None:
     assert report["precautionary_actions"] >= 1
     action = alice["precautionary"][0]
     assert action["action"] == "climb" and action["needed_s"] > action["time_to_meet_s"]
-    assert 1 in action["segments"]  # the leg over the crossing
+    assert 2 in action["segments"]  # the leg over the crossing (0: the launch leg)
     (pair,) = report["pairs"]
     assert pair["conflict"] and pair["acted"] and pair["resolved"]
     assert pair["closest_approach_m"] >= report["offset_m"] - RESOLVED_TOLERANCE_M
@@ -218,7 +219,7 @@ def test_failsafe_acts_when_the_peer_falls_silent_mid_run() -> None:
     alice = report["drones"][0]
     assert not alice["runs"], alice["timeline"]  # no result ever came
     (action,) = alice["precautionary"] or [alice["timeline"]]
-    assert action["action"] == "climb" and 1 in action["segments"]  # the leg over the crossing
+    assert action["action"] == "climb" and 2 in action["segments"]  # the crossing leg
     (pair,) = report["pairs"]
     assert pair["conflict"] and pair["acted"] and pair["resolved"]
 
@@ -239,3 +240,17 @@ def test_failsafe_hold_stops_before_the_segments_within_reach() -> None:
     (pair,) = report["pairs"]
     assert pair["acted"] and pair["closest_approach_m"] > 50  # drone 1 waited short of it
     assert not report["finished"]  # it holds until a result arrives
+
+
+def test_replay_px4_flag_refuses_a_directory_that_is_no_px4_build(tmp_path: Path) -> None:
+    """``--px4 DIR`` without bin/px4 and etc/: one line, exit 2, before anything starts."""
+    crossing = str(SCENARIOS / "crossing.toml")
+    run = subprocess.run(
+        [sys.executable, "-m", "companion", "replay", crossing, "--px4", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.strip().splitlines()[-1].startswith("error: PX4 SITL:")
+    assert "Traceback" not in run.stderr and not run.stdout.strip()

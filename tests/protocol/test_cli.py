@@ -56,8 +56,10 @@ def test_demo_runs_and_agrees_with_the_plaintext() -> None:
     assert "CROSSES" in result.stdout and "Bob learns nothing." in result.stdout
 
 
-def test_compare_on_qgc_plans(tmp_path: Path) -> None:
-    """Two .plan missions: Alice's grid at her home, Bob projects his own waypoints."""
+def test_compare_sends_mission_files_to_the_companion(tmp_path: Path) -> None:
+    """Two .plan missions: their flown path is the companion's model (launch leg, loiters,
+    RTL), so ``python -m protocol compare`` points to ``python -m companion compare``
+    (tests/companion/test_over_link.py)."""
 
     def plan(points: list[tuple[float, float]]) -> str:
         items = [
@@ -92,7 +94,6 @@ def test_compare_on_qgc_plans(tmp_path: Path) -> None:
     alice, bob = tmp_path / "alice.plan", tmp_path / "bob.plan"
     alice.write_text(plan([(47.3977, 8.5456), (47.3977, 8.5500), (47.3990, 8.5500)]))
     bob.write_text(plan([(47.3960, 8.5480), (47.3995, 8.5480)]))
-    result = run_cli("compare", str(alice), str(bob), "--json")
-    assert result.returncode == 0, result.stderr
-    (case,) = json.loads(result.stdout)["cases"]
-    assert case["hits"] == case["plain_hits"] == [True, False]
+    # mission files are compared on the path the autopilot flies: the companion's model
+    refused = run_cli("compare", str(alice), str(bob), "--json")
+    assert refused.returncode == 2 and "python -m companion compare" in refused.stderr

@@ -10,7 +10,7 @@ import pytest
 
 from protocol.budget import BudgetExceededError, RunBudget
 from protocol.errors import InputRangeError, LocalProtocolError, RemoteProtocolError
-from protocol.formats import InputFormatError, parse_paper_text, parse_plan
+from protocol.formats import InputFormatError, parse_paper_text
 from protocol.grid import GridKind, GridSpec, comparison_bits
 
 LAT, LON = 473_977_420, 85_455_940
@@ -72,42 +72,20 @@ def waypoint(lat: float, lon: float, command: int = 16) -> dict[str, object]:
     return {"type": "SimpleItem", "command": command, "params": [0, 0, 0, 0, lat, lon, 20]}
 
 
-def test_qgc_plan() -> None:
-    text = plan(
-        [
-            waypoint(0, 0, 22),  # takeoff here
-            waypoint(47.398, 8.546),
-            {"type": "SimpleItem", "command": 178, "params": [1, 5, -1, 0, 0, 0, 0]},  # speed
-            waypoint(47.399, 8.547),
-        ]
-    )
-    assert parse_plan(text) == (
-        (473_977_420, 85_455_940),
-        (473_980_000, 85_460_000),
-        (473_990_000, 85_470_000),
-    )
-    for bad in (
-        "[]",
-        "{",
-        json.dumps({"fileType": "Plan"}),
-        plan([waypoint(47.0, float("nan"))]),
-        plan([]),
-    ):
-        with pytest.raises(InputFormatError):
-            parse_plan(bad)
-
-
-def test_compare_cli_on_plans(tmp_path: Path) -> None:
+def test_mission_files_are_left_to_the_companion(tmp_path: Path) -> None:
+    """The ground path of a mission is the companion's one model (launch leg, loiters,
+    DO_JUMP, RTL): this package refuses to guess it and says where to go."""
     from protocol.compare import load_cases
 
     a, b = tmp_path / "a.plan", tmp_path / "b.plan"
     a.write_text(plan([waypoint(47.3985, 8.5456)]))
-    b.write_text(
-        plan([waypoint(47.3980, 8.5440), waypoint(47.3980, 8.5470)], home=[47.398, 8.544, 0])
-    )
-    (case,) = load_cases(a, b)
-    assert case.grid.kind is GridKind.GEO and case.alice[0] == (0, 0)
-    assert len(case.alice) == 2 and len(case.bob) == 2  # home = first waypoint, merged
+    b.write_text(plan([waypoint(47.3980, 8.5440), waypoint(47.3980, 8.5470)]))
+    with pytest.raises(InputFormatError, match="python -m companion compare"):
+        load_cases(a, b)
+    paper = tmp_path / "p.txt"
+    paper.write_text("(0,0)(1,1)\n")
+    with pytest.raises(InputFormatError, match="both files must be missions"):
+        load_cases(a, paper)
 
 
 def test_run_budget() -> None:
