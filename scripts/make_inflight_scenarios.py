@@ -25,9 +25,12 @@ def at(east: float, north: float) -> tuple[float, float]:
     return lat, lon
 
 
-def route(name: str, heading_deg: float, stations: list[float], home_back: float = 60.0) -> None:
+def route(name: str, heading_deg: float, stations: list[float], home_back: float = 0.0) -> None:
     """A straight route along ``heading_deg`` (0 = north) through C: waypoints at the given
-    distances from C (negative: before C), home ``home_back`` metres before the first."""
+    distances from C (negative: before C), home ``home_back`` metres before the first.  With
+    home at the first station (the default) the take-off climbs over it and the flown path
+    has no launch leg of its own: len(stations) segments with the 20 m landing leg, a power
+    of two for the protocol's padding (a 60 m launch leg made 5 segments, padded to 8)."""
     ux, uy = math.sin(math.radians(heading_deg)), math.cos(math.radians(heading_deg))
 
     def point(d: float) -> tuple[float, float]:

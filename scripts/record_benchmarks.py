@@ -1,7 +1,8 @@
 """Re-run the benchmarks and rewrite their sections of docs/benchmarks.md.
 
 Usage: .venv/bin/python scripts/record_benchmarks.py [crypto] [paper] [paper-dgk] [scaling]
-[scaling-2000] [design] [link] [replays] (default: all) [--repeat N]
+[scaling-2000] [design] [link] [replays] [replays-px4] (default: all; replays-px4 only with
+PX4_SITL set to a PX4 SITL build) [--repeat N]
 
 Each section sits between markers ``<!-- bench NAME -->`` and ``<!-- /bench NAME -->``; the
 rest of the file is kept.  The new file is written next to the old one and renamed over it, so
@@ -35,11 +36,13 @@ DOC = ROOT / "docs" / "benchmarks.md"
 SCENARIOS = ROOT / "sitl_configs" / "scenarios"
 
 
-def replays() -> str:
-    """Every shipped scenario once (single runs): the replay report's figures."""
+def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
+    """Every shipped scenario once (single runs): the replay report's figures; with ``px4``
+    (a PX4 SITL build) the ``names`` scenarios on PX4 vehicles."""
+    how = f" --px4 {px4}" if px4 else ""
     lines = [
-        "Replays: `python -m companion replay sitl_configs/scenarios/NAME.toml --json`, one run "
-        "each (single runs, not medians; simulated seconds).  Radio bytes: everything the "
+        f"Replays: `python -m companion replay sitl_configs/scenarios/NAME.toml{how} --json`, "
+        "one run each (single runs, not medians; simulated seconds).  Radio bytes: everything the "
         "companions sent (beacons, protocol messages, link headers, ACKs and retransmissions), "
         "all drones together.  First result: when the first run gave an Alice her answer "
         "(simulated seconds from the start); closest approach of each conflicting pair without "
@@ -49,10 +52,12 @@ def replays() -> str:
         "| first result | closest without -> with |",
         "|---|---|---:|---:|---:|---:|---|---|",
     ]
-    for path in sorted(SCENARIOS.glob("*.toml")):
-        print(f"  ... replay {path.stem}", file=sys.stderr, flush=True)
+    paths = [SCENARIOS / f"{n}.toml" for n in names] or sorted(SCENARIOS.glob("*.toml"))
+    for path in paths:
+        print(f"  ... replay {path.stem}{how}", file=sys.stderr, flush=True)
+        extra = ["--px4", px4] if px4 else []
         run = subprocess.run(  # noqa: S603 -- our own interpreter and scenario files
-            [sys.executable, "-m", "companion", "replay", str(path), "--json"],
+            [sys.executable, "-m", "companion", "replay", str(path), "--json", *extra],
             capture_output=True,
             text=True,
             check=False,
@@ -90,6 +95,10 @@ def sections(repeat: int) -> dict[str, Callable[[], str]]:
         "design": lambda: format_design(bench_design()),
         "link": lambda: format_link(bench_link()),
         "replays": replays,
+        # PX4 SITL (needs PX4_SITL=build): the crossing and the in-flight crossing
+        "replays-px4": lambda: replays(
+            os.environ.get("PX4_SITL", ""), ("crossing", "inflight_crossing")
+        ),
     }
 
 
@@ -114,7 +123,10 @@ def main() -> int:
     table = sections(args.repeat)
     machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     text = DOC.read_text() if DOC.exists() else "# Benchmarks\n"
-    for name in args.names or list(table):
+    default = [n for n in table if n != "replays-px4" or os.environ.get("PX4_SITL")]
+    if "replays-px4" in args.names and not os.environ.get("PX4_SITL"):
+        parser.error("replays-px4 needs PX4_SITL=path of a PX4 SITL build")
+    for name in args.names or default:
         body = f"Machine: {machine}.\n\n{table[name]()}"
         print(body, flush=True)
         text = replace_section(text, name, body)

@@ -260,7 +260,7 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
     Idle, a first run with 2 could still end in time: nothing to do.  Busy for 100 s, even
     the smallest run with 2 would be late: the guard climbs over the crossing leg for 2
     without waiting for a run, and says so (``waiting``)."""
-    items, _ = read_plan(SCENARIOS / "inflight_east.plan")  # -600, -250, 250 m east, land 635
+    items, _ = read_plan(SCENARIOS / "inflight_east.plan")  # -600, -250, 250, 600 m east
 
     async def main() -> tuple[Companion, _Autopilot]:
         clock = Clock()

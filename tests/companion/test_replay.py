@@ -202,7 +202,7 @@ def test_failsafe_climbs_when_the_result_cannot_arrive_in_time() -> None:
     assert report["precautionary_actions"] >= 1
     action = alice["precautionary"][0]
     assert action["action"] == "climb" and action["needed_s"] > action["time_to_meet_s"]
-    assert 2 in action["segments"]  # the leg over the crossing (0: the launch leg)
+    assert 1 in action["segments"]  # the leg over the crossing
     (pair,) = report["pairs"]
     assert pair["conflict"] and pair["acted"] and pair["resolved"]
     assert pair["closest_approach_m"] >= report["offset_m"] - RESOLVED_TOLERANCE_M
@@ -219,7 +219,7 @@ def test_failsafe_acts_when_the_peer_falls_silent_mid_run() -> None:
     alice = report["drones"][0]
     assert not alice["runs"], alice["timeline"]  # no result ever came
     (action,) = alice["precautionary"] or [alice["timeline"]]
-    assert action["action"] == "climb" and 2 in action["segments"]  # the crossing leg
+    assert action["action"] == "climb" and 1 in action["segments"]  # the crossing leg
     (pair,) = report["pairs"]
     assert pair["conflict"] and pair["acted"] and pair["resolved"]
 

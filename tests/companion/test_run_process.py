@@ -14,7 +14,7 @@ import pytest
 from companion.config import ConfigError, load_config
 from companion.missionfile import write_wpl
 
-from .missions import survey
+from .missions import HOME, survey
 
 
 def test_config_file_and_flags(tmp_path: Path) -> None:
@@ -79,7 +79,7 @@ def _wait_for(proc: subprocess.Popen[str], pattern: str, seconds: float = 30) ->
 @pytest.mark.slow
 def test_companion_process_starts_and_stops_cleanly(tmp_path: Path) -> None:
     mission = tmp_path / "m.txt"
-    write_wpl(mission, survey(6))
+    write_wpl(mission, survey(6), HOME)
     hub = _spawn("link-hub", "--port", "0")
     mock = _spawn("mock-autopilot", "--mission", str(mission), "--instance", "43")
     try:
