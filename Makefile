@@ -30,8 +30,10 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy --strict protocol companion
 
+# Two workers: the real-time tests (replays, PX4 SITL; xdist_group "realtime") run one at a
+# time on one of them, everything else shares the other.
 test: lint typecheck
-	$(VENV)/bin/pytest
+	$(VENV)/bin/pytest -n 2 --dist loadgroup
 
 bench: $(STAMP)
 	$(PY) -m protocol bench crypto

@@ -123,7 +123,12 @@ class Personality:
     def refusal(self, it: MissionItem) -> tuple[Refusal, str] | None:
         """Why the autopilot refuses this item (None: it takes it)."""
         if it.frame not in self.frames:
-            return Refusal.FRAME, f"{self.name} refuses frame {it.frame}"
+            hint = (
+                " (above terrain: give it relative or AMSL altitudes)"
+                if it.frame in FRAMES_TERRAIN
+                else ""
+            )
+            return Refusal.FRAME, f"{self.name} refuses frame {it.frame}{hint}"
         if it.mission_type != 0:
             return None
         if it.command in self.unsupported_commands:

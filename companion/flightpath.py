@@ -45,6 +45,7 @@ from .mission import (
 )
 
 DO_JUMP = 177
+JUMP_TAG, DO_JUMP_TAG = 600, 601  # ArduPilot: a jump to the JUMP_TAG item with tag param1
 MAX_ORDER = 4096  # items in one flown order (bounds loops of loops)
 LOITER_SIDES = 8
 # Points this close are one place: PX4's HOME_POSITION is a few cm off the home it was given
@@ -115,7 +116,14 @@ class FlightPath:
 
 
 def jump_target(items: Sequence[MissionItem], jump: MissionItem) -> int:
+    """The index a DO_JUMP (param1: the item number) or DO_JUMP_TAG (param1: a JUMP_TAG's
+    tag) continues at."""
     target = jump.param1
+    if jump.command == DO_JUMP_TAG:
+        for k, it in enumerate(items):
+            if it.command == JUMP_TAG and it.param1 == target:
+                return k
+        raise MissionError(f"item {jump.seq}: DO_JUMP_TAG to tag {target}: no JUMP_TAG has it")
     if not math.isfinite(target) or not 0 <= int(target) < len(items):
         raise MissionError(f"item {jump.seq}: DO_JUMP to {target}, outside 0..{len(items) - 1}")
     return int(target)
@@ -136,7 +144,7 @@ def flight_order(
     i = first
     while 0 <= i < len(items) and len(order) < limit:
         item = items[i]
-        if item.command == DO_JUMP:
+        if item.command in (DO_JUMP, DO_JUMP_TAG):
             target = jump_target(items, item)
             wanted = int(item.param2) if math.isfinite(item.param2) else 0
             if wanted < 0:

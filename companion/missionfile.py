@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .flightpath import DO_JUMP
 from .mission import (
     EARTH_RADIUS_M,
     FRAMES_GLOBAL,
@@ -81,6 +82,17 @@ def _checked(item: MissionItem, where: str) -> MissionItem:
     return item
 
 
+def shift_jumps(items: Sequence[MissionItem], delta: int) -> list[MissionItem]:
+    """DO_JUMP targets (param1, an item number) moved by ``delta``: a home item added in
+    front (+1, ArduPilot and WPL count home as item 0) or taken away (-1)."""
+    return [
+        it.replace(param1=it.param1 + delta)
+        if it.command == DO_JUMP and math.isfinite(it.param1)
+        else it
+        for it in items
+    ]
+
+
 def _complete(items: list[MissionItem], name: str) -> list[MissionItem]:
     if not items:
         raise MissionError(f"{name}: the mission has no items")
@@ -91,6 +103,8 @@ def _complete(items: list[MissionItem], name: str) -> list[MissionItem]:
 
 # commands that may stand "here", without a position (QGC writes null lat/lon for them)
 POSITION_OPTIONAL = frozenset({NAV_TAKEOFF, NAV_VTOL_TAKEOFF, NAV_LAND, NAV_VTOL_LAND})
+ALT_CALC_ABOVE_TERRAIN = 3  # QGC's AltitudeMode "calculated above terrain"
+FRAME_TERRAIN = 10  # MAV_FRAME_GLOBAL_TERRAIN_ALT
 NULL_ALTITUDE_HINT = (
     "QGroundControl writes null when an altitude 'calculated above terrain' had no terrain "
     "data: open the plan with terrain data and save it again, or give the altitude"
@@ -130,7 +144,11 @@ class MissionFile:
             raise MissionError("an ArduPilot mission needs a home (item 0): the file has none")
         lat, lon = self.home_degE7 or (0, 0)
         home_item = MissionItem(0, 0, NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, lat, lon, self.home[2])
-        return normalise([home_item, *self.items])
+        return normalise([home_item, *shift_jumps(self.items, +1)])
+
+
+def _finite(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _simple_item(raw: dict[str, Any], number: int, where: str) -> MissionItem:
@@ -151,7 +169,17 @@ def _simple_item(raw: dict[str, Any], number: int, where: str) -> MissionItem:
                 raise MissionError(f"{where}: command {command} needs a latitude and longitude")
             p[4] = p[5] = 0.0  # take off / land where the vehicle is
         if not math.isfinite(z):
-            raise MissionError(f"{where}: altitude is null ({NULL_ALTITUDE_HINT})")
+            above = raw.get("Altitude")
+            if (
+                raw.get("AltitudeMode") != ALT_CALC_ABOVE_TERRAIN
+                or not isinstance(above, int | float)
+                or not _finite(above)
+            ):
+                raise MissionError(f"{where}: altitude is null ({NULL_ALTITUDE_HINT})")
+            # "calculated above terrain" without terrain data: what the file still says is
+            # the height above terrain, which is MAV_FRAME_GLOBAL_TERRAIN_ALT (ArduPilot
+            # flies it; PX4 refuses terrain frames, and the upload says so before sending)
+            frame, z = FRAME_TERRAIN, float(above)
     elif not math.isfinite(z):
         z = 0.0  # a command without a position: its param7 is not an altitude
     if frame in FRAMES_GLOBAL:
@@ -302,18 +330,35 @@ def parse_plan_file(text: str, name: str = "plan") -> MissionFile:
         raise MissionError(f"{name}: plannedHomePosition outside the globe")
     home = (hlat, hlon, halt if math.isfinite(halt) else 0.0)
     items: list[MissionItem] = []
+    jump_ids: dict[int, int] = {}  # doJumpId -> index of the item in ``items``
     for number, raw in enumerate(mission["items"]):
         where = f"{name}: mission item {number}"
         if not isinstance(raw, dict):
             raise MissionError(f"{where}: not an object")
+        jump_id = raw.get("doJumpId")
+        if isinstance(jump_id, int) and not isinstance(jump_id, bool):
+            jump_ids.setdefault(jump_id, len(items))
         if raw.get("type") == "SimpleItem":
             items.append(_simple_item(raw, len(items), where))
         elif raw.get("type") == "ComplexItem":
             items.extend(_complex_items(raw, where))
         else:
             raise MissionError(f"{where}: unknown item type {raw.get('type')!r}")
-    items = [it.replace(seq=i) for i, it in enumerate(items)]
+    items = [_jump_by_id(it.replace(seq=i), jump_ids, name) for i, it in enumerate(items)]
     return MissionFile(_complete(items, name), home)
+
+
+def _jump_by_id(item: MissionItem, jump_ids: dict[int, int], name: str) -> MissionItem:
+    """A .plan's DO_JUMP names its target by ``doJumpId`` (QGroundControl turns it into the
+    item number on load): here the index in the mission without home."""
+    if item.command != DO_JUMP:
+        return item
+    target = item.param1
+    if not math.isfinite(target) or int(target) not in jump_ids:
+        raise MissionError(
+            f"{name}: mission item {item.seq}: DO_JUMP to doJumpId {target}: no item has it"
+        )
+    return item.replace(param1=float(jump_ids[int(target)]))
 
 
 def parse_plan_items(text: str, name: str = "plan") -> tuple[list[MissionItem], tuple[float, ...]]:
@@ -333,6 +378,9 @@ def format_plan(items: Sequence[MissionItem], home: Sequence[float]) -> str:
     def num(v: float) -> float | None:
         return None if math.isnan(v) else v
 
+    items = [  # DO_JUMP names its target by doJumpId, item k's being k + 1
+        it.replace(param1=it.param1 + 1) if it.command == DO_JUMP else it for it in items
+    ]
     plan_items = [
         {
             "type": "SimpleItem",
@@ -429,8 +477,8 @@ def parse_wpl_file(text: str, name: str = "mission") -> MissionFile:
     if first.frame not in FRAMES_GLOBAL or (first.x, first.y) == (0, 0):
         raise MissionError(f"{name}: the first item is home and needs a position")
     home = (first.x / 1e7, first.y / 1e7, first.z)
-    rest = [it.replace(seq=i) for i, it in enumerate(items[1:])]
-    return MissionFile(_complete(rest, name), home)
+    rest = [it.replace(seq=i) for i, it in enumerate(items[1:])]  # jumps counted home as 0
+    return MissionFile(_complete(shift_jumps(rest, -1), name), home)
 
 
 def parse_wpl(text: str, name: str = "mission") -> list[MissionItem]:
@@ -448,7 +496,7 @@ def format_wpl(items: Sequence[MissionItem], home: Sequence[float]) -> str:
         0, 0, NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, round(home[0] * 1e7), round(home[1] * 1e7), home[2]
     )
     rows = [WPL_HEADER]
-    for it in [first, *(it.replace(seq=i + 1) for i, it in enumerate(items))]:
+    for it in [first, *(it.replace(seq=i + 1) for i, it in enumerate(shift_jumps(items, +1)))]:
         lat = it.x / 1e7 if it.frame in FRAMES_GLOBAL else float(it.x)
         lon = it.y / 1e7 if it.frame in FRAMES_GLOBAL else float(it.y)
         fields = [

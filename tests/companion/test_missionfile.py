@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from companion.autopilots import ARDUPILOT, PX4, UnsupportedItem
 from companion.flightpath import MOVABLE, flight_path
 from companion.mission import MissionError
 from companion.missionfile import (
@@ -18,6 +19,7 @@ from companion.missionfile import (
     parse_plan_file,
     parse_plan_items,
     parse_wpl,
+    parse_wpl_file,
     read_mission,
     read_mission_file,
     write_plan,
@@ -25,7 +27,7 @@ from companion.missionfile import (
 )
 from companion.planner import plan_offsets
 
-from .missions import HOME, survey
+from .missions import HOME, item, survey
 
 
 def test_round_trips(tmp_path: Path) -> None:
@@ -172,9 +174,20 @@ def test_plan_home_is_not_the_takeoff_item_on_ardupilot() -> None:
     assert items[1].command == TAKEOFF
 
 
-def test_null_altitude_is_an_error_not_zero() -> None:
+def test_null_altitude_is_the_height_above_terrain_or_an_error_never_zero() -> None:
+    """QGC's "calculated above terrain" item without terrain data stores a null altitude and
+    keeps the height above terrain (``Altitude``): that is the terrain frame, which ArduPilot
+    flies and PX4 refuses before anything is sent.  Without ``Altitude``: an error."""
+    mission = read_mission_file(FILES / "terrain_null_altitude.plan")
+    item = mission.items[1]
+    assert (item.frame, item.z) == (10, 40.0)
+    with pytest.raises(UnsupportedItem, match="item 1: PX4 refuses frame 10 \\(above terrain"):
+        PX4.check(mission.for_autopilot())
+    ARDUPILOT.check(mission.for_autopilot(ardupilot=True))
+    doc = json.loads((FILES / "terrain_null_altitude.plan").read_text())
+    del doc["mission"]["items"][1]["Altitude"]
     with pytest.raises(MissionError, match=r"mission item 1: altitude is null \(QGroundControl"):
-        read_mission_file(FILES / "terrain_null_altitude.plan")
+        parse_plan_file(json.dumps(doc))
 
 
 def test_waypoint_without_position_is_an_error() -> None:
@@ -207,3 +220,83 @@ def test_px4_refuses_what_it_cannot_fly_before_upload() -> None:
     assert any("0,0" in p for p in PX4.start_problems(wpl.items))  # take-off "here"
     px4 = wpl.for_autopilot()  # for PX4 the take-off gets home's position
     assert not PX4.start_problems(px4) and (px4[0].x, px4[0].y) == wpl.home_degE7
+
+
+def _jump_plan(ids: list[int], jump_to: int) -> str:
+    items = [
+        {
+            "type": "SimpleItem",
+            "command": 16,
+            "frame": 3,
+            "doJumpId": k,
+            "params": [0, 0, 0, None, 47.3977 + 0.001 * n, 8.5456, 30],
+        }
+        for n, k in enumerate(ids)
+    ]
+    items.append(
+        {
+            "type": "SimpleItem",
+            "command": 177,
+            "frame": 2,
+            "doJumpId": 99,
+            "params": [jump_to, 1, 0, 0, 0, 0, 0],
+        }
+    )
+    return json.dumps(
+        {
+            "fileType": "Plan",
+            "mission": {"items": items, "plannedHomePosition": [47.3977, 8.5456, 488]},
+        }
+    )
+
+
+def test_plan_do_jump_names_its_target_by_do_jump_id() -> None:
+    """QGroundControl's DO_JUMP param1 is the target's doJumpId, whatever the numbering."""
+    mission = parse_plan_file(_jump_plan([20, 30, 40], 30))
+    assert mission.items[3].param1 == 1  # the item with doJumpId 30, numbered without home
+    path = flight_path(mission.for_autopilot(), mission.home_degE7)
+    assert [v.items for v in path.vertices] == [(0,), (1,), (2,), (1,), (2,)]
+    ardupilot = mission.for_autopilot(ardupilot=True)
+    assert ardupilot[4].param1 == 2  # ArduPilot numbers home as item 0
+    assert path.points == flight_path(ardupilot, None, ardupilot=True).points
+    with pytest.raises(MissionError, match="mission item 3: DO_JUMP to doJumpId 35"):
+        parse_plan_file(_jump_plan([20, 30, 40], 35))
+
+
+def test_wpl_do_jump_counts_home_as_item_0_and_round_trips(tmp_path: Path) -> None:
+    text = "\n".join(
+        [
+            "QGC WPL 110",
+            "0\t1\t0\t16\t0\t0\t0\t0\t47.3977\t8.5456\t488\t1",
+            "1\t0\t3\t16\t0\t0\t0\t0\t47.3987\t8.5456\t30\t1",
+            "2\t0\t3\t16\t0\t0\t0\t0\t47.3987\t8.5466\t30\t1",
+            "3\t0\t3\t16\t0\t0\t0\t0\t47.3977\t8.5466\t30\t1",
+            "4\t0\t0\t177\t2\t1\t0\t0\t0\t0\t0\t1",
+        ]
+    )
+    mission = parse_wpl_file(text)
+    assert mission.items[3].param1 == 1  # line 2 of the file is item 1 without home
+    order = [v.items[0] for v in flight_path(mission.for_autopilot(), None).vertices]
+    assert order == [0, 1, 2, 1, 2]
+    assert mission.for_autopilot(ardupilot=True)[4].param1 == 2
+    for write, read in ((write_wpl, parse_wpl_file), (write_plan, parse_plan_file)):
+        out = tmp_path / "again"
+        write(out, mission.items, mission.home or ())
+        again = read(out.read_text())
+        assert [it.param1 for it in again.items] == [it.param1 for it in mission.items]
+
+
+def test_ardupilot_do_jump_tag_loops_to_its_jump_tag() -> None:
+    """ArduPilot's DO_JUMP_TAG (601) continues at the JUMP_TAG (600) with its tag."""
+    items = [
+        item(0, 16, 47.3977, 8.5456, 488.0, frame=0),  # home
+        item(1, 600, frame=2, param1=7.0),  # JUMP_TAG 7
+        item(2, 16, 47.3987, 8.5456),
+        item(3, 16, 47.3987, 8.5466),
+        item(4, 601, frame=2, param1=7.0).replace(param2=1.0),  # DO_JUMP_TAG 7, once
+        item(5, 16, 47.3977, 8.5466),
+    ]
+    order = [v.items for v in flight_path(items, None, ardupilot=True).vertices]
+    assert order == [(), (2,), (3,), (2,), (3,), (5,)]  # home (item 0), the loop once more
+    with pytest.raises(MissionError, match=r"DO_JUMP_TAG to tag 8\.0"):
+        flight_path([*items[:4], items[4].replace(param1=8.0)], None, ardupilot=True)

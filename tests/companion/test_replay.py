@@ -24,6 +24,8 @@ from companion.replay import (
 from companion.replay_vehicles import RESOLVED_TOLERANCE_M
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "sitl_configs" / "scenarios"
+# real time, scaled: one replay at a time under ``make test``'s two workers
+pytestmark = pytest.mark.xdist_group("realtime")
 
 
 def _replay(name: str) -> dict:  # type: ignore[type-arg]

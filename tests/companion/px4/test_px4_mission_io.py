@@ -26,7 +26,12 @@ from companion.mission import (
 )
 from companion.sim_px4 import HOME, MissionRefused, Px4Build, Px4Vehicle
 
-pytestmark = [pytest.mark.asyncio, pytest.mark.px4, pytest.mark.slow]
+pytestmark = [
+    pytest.mark.asyncio,
+    pytest.mark.px4,
+    pytest.mark.slow,
+    pytest.mark.xdist_group("realtime"),
+]
 
 SPEED = 10.0  # PX4_SIM_SPEED_FACTOR: lock-step, about 9x real time measured on 2 cores
 SETTLE_S = 0.3  # after a harness upload: a read-back at once may return the previous mission

@@ -12,7 +12,7 @@ import pytest
 from companion.replay import load_scenario, run_replay
 from companion.sim_px4 import Px4Build
 
-pytestmark = [pytest.mark.px4, pytest.mark.slow]
+pytestmark = [pytest.mark.px4, pytest.mark.slow, pytest.mark.xdist_group("realtime")]
 
 SCENARIOS = Path(__file__).resolve().parents[3] / "sitl_configs" / "scenarios"
 
