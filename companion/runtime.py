@@ -146,6 +146,7 @@ class Companion:
         self.relative_alt = 0.0
         self.speed_m_s = 0.0
         self.current_item = 0
+        self.has_flown = False  # airborne at least once since the companion started
         self._tasks: list[asyncio.Task[None]] = []
         self._children: set[asyncio.Task[None]] = set()
         self._busy = asyncio.Lock()
@@ -254,6 +255,7 @@ class Companion:
                 was_on_ground = self.on_ground
                 self.relative_alt = float(p.relative_altitude_m)
                 if was_on_ground and not self.on_ground:
+                    self.has_flown = True
                     self._beacon_now.set()  # taking off: announce it
                 now = self.clock.now()
                 if last is None or now - last[0] >= 1.0:
@@ -470,8 +472,18 @@ class Companion:
     # ------------------------------------------------------------------ Alice
 
     def _remaining_path(self) -> tuple[int, list[tuple[int, int]]]:
-        start = self.path.start_at(self.current_item) if not self.on_ground else 0
-        return start, self.path.points[start:]
+        """The path still to fly: all of it before the first take-off; in flight from the
+        leg to the current item; landed after flying, from there on -- and nothing (the
+        landing point) once the current item is the last one on the path, so a drone whose
+        mission is over never compares, as Alice, a path it will not fly again."""
+        if self.on_ground and not self.has_flown:
+            return 0, self.path.points
+        start = self.path.start_at(self.current_item)
+        points = self.path.points[start:]
+        last = max((i for v in self.path.vertices for i in v.items), default=0)
+        if self.on_ground and self.current_item >= last:
+            return len(self.path.points) - 1, points[-1:]
+        return start, points
 
     def _horizon_m(self, peer: Peer, path: list[tuple[int, int]]) -> int:
         """How far ahead the near run looks: long enough that what lies beyond can wait for

@@ -175,6 +175,9 @@ def find_build(path: str | os.PathLike[str]) -> Px4Build:
 # ---------------------------------------------------------------------- instances
 
 _IN_USE: set[int] = set()  # instances this process runs (their ports are bound only later)
+_TAKEN: set[int] = set()  # instances a px4 refused as "already running" (skipped from then on)
+START_TRIES = 3
+ALREADY_RUNNING = "PX4 server already running"
 
 
 def _port_free(port: int) -> bool:
@@ -208,7 +211,7 @@ def free_instance(start: int = 1) -> int:
     """An instance in 1..39, from ``start`` on, whose six UDP ports are all free right now and
     that this process does not run already."""
     for instance in range(max(start, INSTANCES.start), INSTANCES.stop):
-        if instance in _IN_USE or not _px4_lock_free(instance):
+        if instance in _IN_USE or instance in _TAKEN or not _px4_lock_free(instance):
             continue
         if all(_port_free(base + instance) for base in PORT_BASES):
             return instance
@@ -336,15 +339,25 @@ class Px4Vehicle:
         """Start px4 and wait until it is ready for take-off and talks to us."""
         if self._process is not None:
             raise Px4Error("already started")
-        self.instance = (
-            free_instance() if self._requested_instance is None else self._requested_instance
-        )
-        _IN_USE.add(self.instance)
-        try:
-            await self._start()
-        except BaseException:
-            await self.stop()
-            raise
+        for attempt in range(START_TRIES):
+            self.instance = (
+                free_instance() if self._requested_instance is None else self._requested_instance
+            )
+            _IN_USE.add(self.instance)
+            try:
+                await self._start()
+                return
+            except Px4Error as exc:
+                await self.stop()
+                # another px4 took the instance between our check and its start (or one
+                # still shutting down holds its lock): try the next free one
+                taken = ALREADY_RUNNING in str(exc) and self._requested_instance is None
+                if not taken or attempt == START_TRIES - 1:
+                    raise
+                _TAKEN.add(self.instance)
+            except BaseException:
+                await self.stop()
+                raise
 
     async def _start(self) -> None:
         self.workdir = Path(tempfile.mkdtemp(prefix=f"px4-sitl-{self.instance}-"))
