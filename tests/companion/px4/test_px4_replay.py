@@ -22,12 +22,14 @@ def test_crossing_on_two_px4_vehicles(px4_build: Px4Build) -> None:
     the crossing leg on PX4 (the upload verified by meaning: PX4 reads frame 3 back as 6),
     and the two PX4 vehicles pass with the offset between them."""
     scenario = load_scenario(SCENARIOS / "crossing.toml")
-    report = asyncio.run(run_replay(scenario, px4=px4_build)).report
+    # at SIH's 10x: nothing on this scenario is close to a deadline (the default cap of 5 is
+    # for in-flight encounters, where the companions' CPU time counts in simulated time)
+    report = asyncio.run(run_replay(scenario, px4=px4_build, px4_speed_max=10.0)).report
     assert report["finished"], report
     assert report["time_scale"] == 10.0  # the scenario's 40x capped at SIH's 10x
     first, second = report["drones"]
     assert first["vehicle"] == second["vehicle"] == "px4-sitl"
-    assert first["flagged_segments"] == first["conflicting_segments"] == [1]  # the crossing
+    assert first["flagged_segments"] == first["conflicting_segments"] == [0]  # the crossing
     assert first["verified"] and first["vehicle_holds"] == "edited"
     assert not second["edits"] and second["vehicle_holds"] == "original"
     (pair,) = report["pairs"]
