@@ -21,7 +21,6 @@ k + 1 -- of this list, so the protocol's segment k and the planner's segment k a
 from __future__ import annotations
 
 import enum
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -234,8 +233,3 @@ def flight_path(
                 add(lat, lon, i, VertexKind.LOITER, movable)
             add(it.x, it.y, i, VertexKind.POSITION, movable)
     return FlightPath(tuple(out))
-
-
-def segment_pairs(path: FlightPath) -> list[tuple[int, int]]:
-    """Segment k as the pair of vertex indices it joins."""
-    return list(itertools.pairwise(range(len(path.vertices))))

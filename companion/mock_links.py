@@ -20,6 +20,15 @@ PX4_BIND, PX4_SEND = 14580, 14540  # API/onboard link of instance 0
 PX4_GCS_BIND, PX4_GCS_SEND = 18570, 14550  # GCS link of instance 0 (sends to 14550 for all)
 
 
+def parse_datagram(mav: Any, data: bytes) -> list[Any]:
+    """The MAVLink messages of one UDP datagram; garbage yields none."""
+    try:
+        messages = mav.parse_buffer(data) or []
+    except mavlink.MAVError:
+        return []
+    return [m for m in messages if m.get_type() != "BAD_DATA"]
+
+
 @dataclass(frozen=True)
 class Faults:
     """Fault injection: every field off by default."""
@@ -80,13 +89,8 @@ class Link(asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
         if not self.partnered:
             self.partner, self.partnered = addr, True
-        try:
-            messages = self.mav.parse_buffer(data) or []
-        except mavlink.MAVError:
-            return
-        for message in messages:
-            if message.get_type() != "BAD_DATA":
-                self._receive(self, message)
+        for message in parse_datagram(self.mav, data):
+            self._receive(self, message)
 
     def send(self, message: Any, delay_s: float = 0.0) -> None:
         """Pack ``message`` with this link's sequence number and send it to the partner."""

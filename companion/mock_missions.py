@@ -34,27 +34,6 @@ LEGACY_FRAMES = {5: 0, 6: 3, 11: 10}  # the _INT frames' twins for MISSION_ITEM
 RETRY_S, RETRIES = 0.25, 8  # the autopilot drives uploads: it re-requests lost items
 
 
-def item_message(mav: Any, target_system: int, target_component: int, it: MissionItem) -> Any:
-    """MISSION_ITEM_INT for one item."""
-    return mav.mission_item_int_encode(
-        target_system,
-        target_component,
-        it.seq,
-        it.frame,
-        it.command,
-        it.current,
-        it.autocontinue,
-        it.param1,
-        it.param2,
-        it.param3,
-        it.param4,
-        it.x,
-        it.y,
-        it.z,
-        it.mission_type,
-    )
-
-
 def _xy_scale(frame: int) -> float:
     """MISSION_ITEM_INT x/y per MISSION_ITEM x/y: degE7, metres * 1e4 (local), or 1."""
     if frame in FRAMES_GLOBAL:
@@ -62,29 +41,20 @@ def _xy_scale(frame: int) -> float:
     return 1.0 if frame == MISSION_FRAME else 1e4
 
 
-def legacy_item_message(
-    mav: Any, target_system: int, target_component: int, it: MissionItem
+def item_message(
+    mav: Any, target_system: int, target_component: int, it: MissionItem, *, legacy: bool = False
 ) -> Any:
-    """Legacy MISSION_ITEM (x/y float: degrees in global frames) for one item, in the
-    non-INT twin of its frame (PX4 measured: 3 where MISSION_ITEM_INT says 6)."""
-    scale = _xy_scale(it.frame)
-    return mav.mission_item_encode(
-        target_system,
-        target_component,
-        it.seq,
-        LEGACY_FRAMES.get(it.frame, it.frame),
-        it.command,
-        it.current,
-        it.autocontinue,
-        it.param1,
-        it.param2,
-        it.param3,
-        it.param4,
-        it.x / scale,
-        it.y / scale,
-        it.z,
-        it.mission_type,
-    )
+    """MISSION_ITEM_INT for one item; ``legacy``: MISSION_ITEM (x/y float: degrees in global
+    frames) in the non-INT twin of its frame (PX4 measured: 3 where MISSION_ITEM_INT says 6)."""
+    head = (target_system, target_component, it.seq)
+    params = (it.command, it.current, it.autocontinue, it.param1, it.param2, it.param3, it.param4)
+    if legacy:
+        scale = _xy_scale(it.frame)
+        frame = LEGACY_FRAMES.get(it.frame, it.frame)
+        return mav.mission_item_encode(
+            *head, frame, *params, it.x / scale, it.y / scale, it.z, it.mission_type
+        )
+    return mav.mission_item_int_encode(*head, it.frame, *params, it.x, it.y, it.z, it.mission_type)
 
 
 def item_from(m: Any, *, legacy: bool) -> MissionItem:
@@ -222,8 +192,9 @@ class MissionServer:
             self._ack(link, m, mavlink.MAV_MISSION_INVALID_SEQUENCE, m.mission_type)
             return
         it = store[m.seq].replace(current=int(m.mission_type == 0 and m.seq == self.current))
-        build = legacy_item_message if legacy else item_message
-        self._reply(link, build(self.mav, m.get_srcSystem(), m.get_srcComponent(), it))
+        self._reply(
+            link, item_message(self.mav, m.get_srcSystem(), m.get_srcComponent(), it, legacy=legacy)
+        )
 
     def _on_mission_request(self, link: Link, m: Any) -> None:
         self._on_mission_request_int(link, m, legacy=True)

@@ -35,7 +35,8 @@ from typing import Any, cast
 from pymavlink.dialects.v20 import common as mavlink
 
 from .mission import MissionItem
-from .mock_missions import item_from, item_message, legacy_item_message
+from .mock_links import parse_datagram
+from .mock_missions import item_from, item_message
 
 GCS_PORT, ONBOARD_PORT, COMPANION_PORT = 18570, 14580, 14540
 PORT_BASES = (GCS_PORT, ONBOARD_PORT, COMPANION_PORT, 14280, 13030, 19450)
@@ -239,13 +240,8 @@ class _GcsLink(asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
         if addr[1] != self.peer[1]:
             return
-        try:
-            messages = self.mav.parse_buffer(data) or []
-        except mavlink.MAVError:
-            return
-        for message in messages:
-            if message.get_type() != "BAD_DATA":
-                self.on_message(message)
+        for message in parse_datagram(self.mav, data):
+            self.on_message(message)
 
     def error_received(self, exc: Exception) -> None:
         pass  # ICMP port unreachable before PX4 binds its port
@@ -732,8 +728,8 @@ class Px4Vehicle:
                 return False
             # PX4 asks with MISSION_REQUEST until it has seen an INT message from us, and
             # takes MISSION_ITEM_INT in answer: the INT form unless ``legacy``
-            encode = legacy_item_message if legacy else item_message
-            reply = encode(self.mav, self.system_id, 1, items[m.seq].replace(seq=m.seq))
+            item = items[m.seq].replace(seq=m.seq)
+            reply = item_message(self.mav, self.system_id, 1, item, legacy=legacy)
             last[0] = reply
             self.send(reply)
             return None  # progress

@@ -19,7 +19,7 @@ from companion.autopilots import PX4
 from companion.flightpath import DO_JUMP, flight_order
 from companion.mission import MissionItem
 from companion.mock_autopilot import FlightModel, MockAutopilot, item_message
-from companion.mock_missions import item_from, legacy_item_message
+from companion.mock_missions import item_from
 from companion.replay import free_udp_port as free_port
 
 from .missions import HOME, item
@@ -111,8 +111,7 @@ class Station(asyncio.DatagramProtocol):
                 return int(m.type)
             self.requested.append(m.seq)
             it = items[m.seq].replace(seq=m.seq, mission_type=mission_type)
-            encode = legacy_item_message if legacy else item_message  # legacy: degrees
-            self.send(lambda mav, it=it, encode=encode: encode(mav, 1, 1, it))
+            self.send(lambda mav, it=it: item_message(mav, 1, 1, it, legacy=legacy))  # degrees
         raise AssertionError("the upload never ended")
 
     async def download(self, mission_type: int = 0) -> list[MissionItem]:
