@@ -1,5 +1,5 @@
-"""Command line: ``python -m companion {run, replay, compare, bench-link, radio-demo, link-hub,
-mock-autopilot, mission show}``."""
+"""Command line: ``python -m companion {run, keys, replay, compare, bench-link, radio-demo,
+link-hub, mock-autopilot, mission show}``."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import sys
 
 from protocol.errors import ProtocolError
 
+from . import keys_cli
 from .link import Channel, Clock, Impairments
 from .link.udp import UdpHub
 
@@ -165,6 +166,11 @@ async def _run(args: argparse.Namespace) -> int:
     )
     log = logging.getLogger("companion")
     settings, link = config.companion, config.link
+    if config.credentials is None:
+        raise ValueError(
+            "the companion needs an identity: [identity] key, certificate and [[trust.operator]] "
+            "in --config (python -m companion keys init|certify)"
+        )
     transport: Transport
     if link.transport == "serial":
         from .link.serial_port import SerialTransport
@@ -179,7 +185,7 @@ async def _run(args: argparse.Namespace) -> int:
     autopilot = await Autopilot.connect(
         settings.autopilot_url, personality=personality(settings.ardupilot)
     )
-    companion = Companion(settings, endpoint, autopilot)
+    companion = Companion(settings, endpoint, autopilot, config.credentials)
     stop = _stop_on_signals()
     try:
         await companion.start()
@@ -363,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     run = sub.add_parser("run", help="the companion process beside one autopilot")
-    run.add_argument("--config", help="TOML settings (see companion/config.py)")
+    run.add_argument("--config", help="TOML settings, [identity] and [trust] included")
     run.add_argument("--node", type=int, help="node id on the radio")
     run.add_argument("--autopilot", help="MAVSDK URL, e.g. udpin://0.0.0.0:14540")
     run.add_argument("--transport", choices=["udp", "serial"], help="link transport")
@@ -374,7 +380,11 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--max-altitude", type=float, help="metres above home")
     run.add_argument("--log-level", choices=["debug", "info", "warning", "error"])
 
+    keys_cli.add_parser(sub)
+
     args = parser.parse_args(argv)
+    if args.command == "keys":
+        return keys_cli.run(args)
     try:
         if args.command == "run":
             from .autopilot import AutopilotError

@@ -18,8 +18,21 @@
     offset_m = 10.0
     direction = "up"
     max_altitude_m = 120.0
+    [identity]                            # python -m companion keys init|certify
+    key = "drone1.key"                    # this drone's signing key (paths: from this file)
+    certificate = "drone1.cert"           # its operator's certificate (names this node)
+    state_dir = "state1"                  # run budget, replay cache, beacon counters
+    [trust]
+    unknown_peers = "ignore"              # untrusted drones: "ignore" (logged once) or "alert"
+    [[trust.operator]]                    # one per operator whose drones we deconflict with
+    name = "acme"
+    key = "acme.pub"                      # a PEM public key file, or 64 hex digits
+    max_segments = 256                    # largest padded path of a run with its drones
+    max_runs_per_hour = 24                # runs its drones together may ask of us
     [limits]
-    max_runs_per_peer = 8
+    max_runs_per_peer = 8                 # runs one certified drone may ask of us per hour
+    max_runs_total = 64                   # runs all drones together may ask of us per hour
+    max_clock_skew_s = 30.0               # beacons and requests further off: refused
     run_timeout_s = 900.0
     beacon_interval_s = 10.0
     initiation_range_m = 5000.0
@@ -40,10 +53,14 @@ from typing import Any
 from protocol.ot.setup import DEFAULT_SECURITY, SECURITY_LEVELS
 from protocol.wire import Suite
 
+from .auth.certificate import Certificate, CertificateError
+from .auth.keys import KeyFileError, PublicKey, read_private_key, read_public_key
+from .auth.session import Identity
+from .auth.trust import Operator, TrustStore, UnknownPeers
 from .failsafe import Action, FailsafeSettings
 from .link.airtime import profile as link_profile
 from .planner import OffsetSettings
-from .runtime import CompanionSettings
+from .runtime import CompanionSettings, Credentials
 
 
 class ConfigError(ValueError):
@@ -63,11 +80,74 @@ class LinkSettings:
 class Config:
     companion: CompanionSettings
     link: LinkSettings
+    credentials: Credentials | None  # None: no [identity] given (the companion needs one)
     log_level: str = "info"
+
+
+def _path(base: Path, value: str) -> Path:
+    path = Path(value).expanduser()
+    return path if path.is_absolute() else base / path
+
+
+def _credentials(doc: dict[str, Any], base: Path, node: int) -> Credentials | None:
+    """[identity] and [trust]: our key and certificate, the operators we trust."""
+    identity = doc.get("identity")
+    if identity is None:
+        return None
+    try:
+        key = read_private_key(_path(base, _get(identity, "key", str, None)))
+        cert_file = _path(base, _get(identity, "certificate", str, None))
+        try:
+            cert = Certificate.decode(cert_file.read_bytes())
+        except OSError as exc:
+            raise ConfigError(f"identity.certificate: {cert_file}: {exc.strerror}") from None
+        except CertificateError as exc:
+            raise ConfigError(f"identity.certificate: {cert_file}: {exc}") from None
+        if cert.drone != key.public:
+            raise ConfigError(f"identity: {cert_file} certifies another key than identity.key")
+        if cert.node != node:
+            raise ConfigError(f"identity: {cert_file} is for node {cert.node}, not node {node}")
+        state = _path(base, _get(identity, "state_dir", str, "state"))
+    except KeyFileError as exc:
+        raise ConfigError(f"identity.key: {exc}") from None
+    trust = doc.get("trust", {})
+    policy = _get(trust, "unknown_peers", str, "ignore")
+    policies = {p.value: p for p in UnknownPeers}
+    if policy not in policies:
+        raise ConfigError(f"trust.unknown_peers: one of {', '.join(policies)}")
+    operators = []
+    entries = trust.get("operator", [])
+    if not isinstance(entries, list) or not entries:
+        raise ConfigError("trust.operator: at least one [[trust.operator]] (name, key)")
+    for k, entry in enumerate(entries):
+        where = f"trust.operator[{k}]"
+        if not isinstance(entry, dict):
+            raise ConfigError(f"{where}: a table")
+        name = _get(entry, "name", str, f"operator{k}")
+        text = _get(entry, "key", str, None)
+        try:
+            public = (
+                PublicKey.parse(text)
+                if len(text.strip()) == 64 and not Path(text).suffix
+                else read_public_key(_path(base, text))
+            )
+            operators.append(
+                Operator(
+                    name,
+                    public,
+                    _get(entry, "max_segments", int, 256),
+                    _get(entry, "max_runs_per_hour", int, 24),
+                )
+            )
+        except (KeyFileError, ValueError) as exc:
+            raise ConfigError(f"{where} ({name}): {exc}") from None
+    return Credentials(Identity(key, cert), TrustStore(operators, policies[policy]), state)
 
 
 def _get(table: dict[str, Any], key: str, kind: type, default: Any) -> Any:
     value = table.get(key, default)
+    if value is None:
+        raise ConfigError(f"{key}: required")
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
     if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
@@ -78,6 +158,7 @@ def _get(table: dict[str, Any], key: str, kind: type, default: Any) -> Any:
 def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
     """Read the TOML file (optional) and apply ``overrides`` (dotted keys, from flags)."""
     doc: dict[str, Any] = {}
+    base = Path(path).parent if path is not None else Path.cwd()
     if path is not None:
         try:
             doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
@@ -132,6 +213,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     if action not in actions:
         raise ConfigError(f"failsafe.action: one of {', '.join(actions)}")
     numbers = {
+        "max_clock_skew_s": _get(limits, "max_clock_skew_s", float, 30.0),
         "beacon_interval_s": _get(limits, "beacon_interval_s", float, 10.0),
         "initiation_range_m": _get(limits, "initiation_range_m", float, 5000.0),
         "run_timeout_s": _get(limits, "run_timeout_s", float, 900.0),
@@ -142,6 +224,9 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     for key, value in numbers.items():
         if value < 0 or (key != "lookahead_s" and value == 0):
             raise ConfigError(f"{key}: must be positive")
+    for key in ("max_runs_per_peer", "max_runs_total"):
+        if _get(limits, key, int, 1) < 1:
+            raise ConfigError(f"limits.{key}: at least 1")
     companion = CompanionSettings(
         node=node,
         autopilot_url=_get(doc, "autopilot", str, "udpin://0.0.0.0:14540"),
@@ -153,6 +238,8 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         initiation_range_m=numbers["initiation_range_m"],
         grid_radius_m=numbers["grid_radius_m"],
         max_runs_per_peer=_get(limits, "max_runs_per_peer", int, 8),
+        max_runs_total=_get(limits, "max_runs_total", int, 64),
+        max_clock_skew_s=numbers["max_clock_skew_s"],
         run_timeout_s=numbers["run_timeout_s"],
         lookahead_s=numbers["lookahead_s"],
         failsafe=FailsafeSettings(actions[action], numbers["margin_s"]),
@@ -166,5 +253,6 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
             _get(link, "serial", str, "/dev/ttyUSB0"),
             _get(link, "baudrate", int, 115200),
         ),
+        _credentials(doc, base, node),
         level,
     )

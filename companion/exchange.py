@@ -1,12 +1,18 @@
 """The path-comparison protocol over the radio link: one asyncio task per party.
 
-The parties are the sans-IO machines of :mod:`protocol.intersection`; this module only moves
-their messages through a :class:`~companion.link.LinkEndpoint`.  A run ends in exactly one of
-two known states: the machine DONE (Alice holds her bits), or the machine FAILED, the session
-closed on both sides (an ABORT frame tells the peer why) and every buffer freed.  The caller
-gets the result or one exception: a :class:`~protocol.errors.ProtocolError` (bad message),
+The parties are the sans-IO machines of :mod:`protocol.intersection`; this module moves their
+messages through a :class:`~companion.link.LinkEndpoint`, inside the authenticated session of
+:mod:`companion.auth.session` (a signed key exchange on the first two messages, AEAD on every
+message).  A run ends in exactly one of two known states: the machine DONE (Alice holds her
+bits), or the machine FAILED, the session closed on both sides (an ABORT frame with a one-byte
+code tells the peer) and every buffer freed.  The caller gets the result or one exception: a
+:class:`~protocol.errors.ProtocolError` (bad message;
+:class:`~companion.auth.AuthenticationError` when it failed authentication),
 :class:`~companion.link.LinkTimeout` (peer silent, retries exhausted or the run's time limit),
-or :class:`~companion.link.PeerAborted`.
+:class:`~companion.link.PeerAborted`, or :class:`PeerRefused` (the peer's signed refusal).
+
+Without a session object (``secure=None``) the messages travel in the clear: benchmarks use it
+to measure what authentication adds; the companion never does.
 """
 
 from __future__ import annotations
@@ -19,18 +25,14 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import TypeVar
 
-from protocol.errors import ProtocolError
+from protocol.errors import ProtocolError, UnknownSetupError
 from protocol.intersection import Alice, Bob, State
 
+from .auth.session import Accepted, AuthenticationError, Initiator, Refusal, Responder
 from .link.arq import LinkError, LinkTimeout, PeerAborted
 from .link.clock import VirtualTimeLoop
-from .link.endpoint import (
-    ABORT_LINK,
-    ABORT_PROTOCOL,
-    ABORT_SHUTDOWN,
-    ABORT_TIMEOUT,
-    LinkEndpoint,
-)
+from .link.endpoint import LinkEndpoint
+from .link.frames import AbortCode
 
 T = TypeVar("T")
 # Protocol steps get threads of their own: MAVSDK's blocking calls and streams occupy the
@@ -38,9 +40,18 @@ T = TypeVar("T")
 _WORKERS = concurrent.futures.ThreadPoolExecutor(max_workers=2, thread_name_prefix="protocol")
 
 
+class PeerRefused(Exception):
+    """The peer declined the run, with a signed reason."""
+
+    def __init__(self, code: Refusal) -> None:
+        super().__init__(f"peer refused the run: {code.name.lower()}")
+        self.code = code
+
+
 @dataclass
 class RunReport:
-    """What one party saw of one run."""
+    """What one party saw of one run.  ``bytes_sent`` counts what went to the link;
+    ``auth_bytes_sent`` the part of it authentication added (key exchange, tags)."""
 
     role: str
     peer: int
@@ -50,7 +61,9 @@ class RunReport:
     cpu_s: float = 0.0
     messages_sent: int = 0
     bytes_sent: int = 0
+    auth_bytes_sent: int = 0
     hits: list[bool] = field(default_factory=list)
+    refused: Refusal | None = None  # Bob: the run ended with this signed refusal of his
 
     @property
     def wall_s(self) -> float:
@@ -94,10 +107,12 @@ class _Party:
         self.report.cpu_s += spent
         return result
 
-    async def send(self, data: bytes) -> None:
+    async def send(self, data: bytes, payload: int | None = None) -> None:
+        """Send ``data`` (``payload`` bytes of it the protocol's own; the rest authentication)."""
         await self.endpoint.send(self.peer, self.session, data)
         self.report.messages_sent += 1
         self.report.bytes_sent += len(data)
+        self.report.auth_bytes_sent += len(data) - (len(data) if payload is None else payload)
 
 
 async def _guard(party: _Party, run: Callable[[], Awaitable[None]], timeout: float | None) -> None:
@@ -107,23 +122,27 @@ async def _guard(party: _Party, run: Callable[[], Awaitable[None]], timeout: flo
             await run()
     except TimeoutError:
         party.machine.abort()
-        endpoint.abort(peer, session, ABORT_TIMEOUT, "run time limit")
+        endpoint.abort(peer, session, AbortCode.TIMEOUT)
         raise LinkTimeout(f"run with node {peer} exceeded its {timeout} s limit") from None
-    except ProtocolError as exc:
+    except AuthenticationError:
         party.machine.abort()
-        endpoint.abort(peer, session, ABORT_PROTOCOL, str(exc))
+        endpoint.abort(peer, session, AbortCode.AUTH)
         raise
-    except PeerAborted:
+    except ProtocolError:
+        party.machine.abort()
+        endpoint.abort(peer, session, AbortCode.PROTOCOL)
+        raise
+    except (PeerAborted, PeerRefused):
         party.machine.abort()
         endpoint.close_session(peer, session)
         raise
-    except LinkError as exc:
+    except LinkError:
         party.machine.abort()
-        endpoint.abort(peer, session, ABORT_LINK, str(exc))
+        endpoint.abort(peer, session, AbortCode.LINK)
         raise
     except asyncio.CancelledError:
         party.machine.abort()
-        endpoint.abort(peer, session, ABORT_SHUTDOWN, "cancelled")
+        endpoint.abort(peer, session, AbortCode.SHUTDOWN)
         raise
     else:
         endpoint.close_session(peer, session)
@@ -136,20 +155,45 @@ async def run_alice(
     peer: int,
     alice: Alice,
     *,
+    secure: Callable[[int], Initiator] | None = None,
+    check_keys: Callable[[bytes, bytes], bool] | None = None,
     timeout: float | None = None,
     charge_cpu: bool = False,
 ) -> RunReport:
-    """Open a session to ``peer`` (Bob) and run Alice to her result."""
+    """Open a session to ``peer`` (Bob) and run Alice to her result.
+
+    ``secure(session)`` makes the run's authenticated session (the link session id is part of
+    what it signs); ``check_keys(boot, public_keys)`` says whether what Bob's answer carries
+    (his per-start nonce and, paper suite, his public keys) is what his beacons announced."""
     session = endpoint.open(peer)
     report = RunReport("alice", peer, session, endpoint.clock.now())
     party = _Party(endpoint, peer, session, alice, report, charge_cpu)
+    channel = secure(session) if secure is not None else None
 
     async def run() -> None:
         message: bytes | None = await party.compute(alice.start)
+        first = True
         while message is not None:
-            await party.send(message)
+            if channel is None:
+                await party.send(message)
+            elif first:
+                await party.send(channel.first(message), len(message))
+            else:
+                await party.send(channel.seal(message), len(message))
             reply = await endpoint.receive(peer, session)
-            message = await party.compute(partial(alice.receive, reply))
+            if channel is not None and first:
+                answer = channel.reply(reply)
+                if not isinstance(answer, Accepted):
+                    raise PeerRefused(answer.code)
+                reply = answer.payload
+                message = await party.compute(partial(alice.receive, reply))
+                if check_keys is not None and not check_keys(answer.boot, alice.peer_keys):
+                    raise AuthenticationError("the peer's keys do not match its beacons")
+            else:
+                if channel is not None:
+                    reply = channel.open(reply)
+                message = await party.compute(partial(alice.receive, reply))
+            first = False
 
     await _guard(party, run, timeout)
     report.hits = alice.hits
@@ -162,22 +206,43 @@ async def serve_bob(
     session: int,
     bob: Bob,
     *,
+    secure: Responder | None = None,
+    boot: bytes = b"",
     timeout: float | None = None,
     charge_cpu: bool = False,
     first: bytes | None = None,
 ) -> RunReport:
-    """Answer the session ``peer`` opened (its first message waits in the inbox, or was
-    taken from it already and is passed as ``first``)."""
+    """Answer the session ``peer`` opened.  Its first message waits in the inbox, or was
+    taken from it already and is passed as ``first`` -- with ``secure``, the HELLO inside the
+    request the :class:`Responder` verified.  A hello naming an OT setup Bob does not hold
+    is answered with a signed refusal (the peer starts a fresh setup)."""
     report = RunReport("bob", peer, session, endpoint.clock.now())
     party = _Party(endpoint, peer, session, bob, report, charge_cpu)
     pending = [first] if first is not None else []
 
     async def run() -> None:
+        opened = False
         while bob.state is not State.DONE:
             message = pending.pop() if pending else await endpoint.receive(peer, session)
-            reply = await party.compute(partial(bob.receive, message))
-            if reply is not None:
+            if secure is not None and opened:
+                message = secure.open(message)
+            try:
+                reply = await party.compute(partial(bob.receive, message))
+            except UnknownSetupError:
+                if secure is None or opened:
+                    raise
+                await party.send(secure.refuse(Refusal.UNKNOWN_SETUP), 0)
+                report.refused = Refusal.UNKNOWN_SETUP
+                return
+            if reply is None:
+                continue
+            if secure is None:
                 await party.send(reply)
+            elif not opened:
+                await party.send(secure.accept(boot, reply), len(reply))
+            else:
+                await party.send(secure.seal(reply), len(reply))
+            opened = True
 
     await _guard(party, run, timeout)
     return report

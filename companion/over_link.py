@@ -4,16 +4,21 @@ Each case runs Alice and Bob as two link endpoints (nodes 1 and 2) on one simula
 on a virtual clock: airtime, duty-cycle waits, timeouts and both parties' CPU time pass as link
 time, so hours of regulated airtime take a fraction of a second of real time.  Counts are real
 frames (their encoded bytes on the air); airtime is the Semtech formula for each of them.
-Every case starts with fresh endpoints, as the first exchange of the hour would.
+Every case starts with fresh endpoints, as the first exchange of the hour would.  Runs are
+authenticated as the companion's are (:mod:`companion.auth.session`: a signed key exchange on
+the first two messages, an AEAD tag on every message), between two throwaway certified
+identities; ``auth_bytes`` says what that added.
 """
 
 from __future__ import annotations
 
 import asyncio
 import dataclasses
+import functools
 import itertools
 import statistics
 import sys
+import tempfile
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
@@ -27,6 +32,8 @@ from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Limits
 from protocol.wire import Suite
 
+from .auth.session import Identity, Init, Initiator, Responder, Route
+from .beacon_budget import beacon_costs
 from .exchange import RunReport, run_alice, serve_bob
 from .flightpath import flight_path
 from .link import (
@@ -44,6 +51,7 @@ from .link import (
 from .link.frames import OVERHEAD
 from .mission import MissionError
 from .missionfile import read_mission_file
+from .replay_fleet import make_fleet
 
 ALICE_NODE, BOB_NODE = 1, 2
 
@@ -56,6 +64,7 @@ async def _run(
     seed: int | None,
     limits: Limits,
     config: LinkConfig | None,
+    authenticated: bool,
 ) -> dict[str, Any]:
     clock = Clock()
     channel = Channel(impairments, seed)
@@ -63,15 +72,32 @@ async def _run(
     a = LinkEndpoint(ALICE_NODE, medium.attach(ALICE_NODE), link, config, clock)
     b = LinkEndpoint(BOB_NODE, medium.attach(BOB_NODE), link, config, clock)
     alice, bob = case.machines(party, limits)
+    fleet = _identities() if authenticated else None
     async with a, b:
 
         async def bob_side() -> RunReport:
             peer, session = await b.accept()
-            return await serve_bob(b, peer, session, bob, charge_cpu=True)
+            if fleet is None:
+                return await serve_bob(b, peer, session, bob, charge_cpu=True)
+            init = Init.parse(await b.receive(peer, session))
+            responder = Responder(fleet[1], init, Route(peer, BOB_NODE, session))
+            arrived = clock.wall() - (clock.now() - b.arrived(peer, session))
+            responder.verify(fleet[0].cert, arrived, 30.0, link.duty_window_s)
+            return await serve_bob(
+                b, peer, session, bob, secure=responder, boot=bytes(16), charge_cpu=True,
+                first=init.hello,
+            )  # fmt: skip
+
+        def secure(session: int) -> Initiator:
+            assert fleet is not None
+            route = Route(ALICE_NODE, BOB_NODE, session)
+            return Initiator(fleet[0], fleet[1].cert, route, clock.wall())
 
         bob_task = asyncio.create_task(bob_side())
         try:
-            report = await run_alice(a, BOB_NODE, alice, charge_cpu=True)
+            report = await run_alice(
+                a, BOB_NODE, alice, secure=secure if fleet else None, charge_cpu=True
+            )
         except BaseException:
             bob_task.cancel()
             raise
@@ -82,6 +108,7 @@ async def _run(
         "plain_hits": path_hits(case.alice, case.bob_on_grid),
         "bytes_alice_to_bob": report.bytes_sent,
         "bytes_bob_to_alice": bob_report.bytes_sent,
+        "auth_bytes": report.auth_bytes_sent + bob_report.auth_bytes_sent,
         "messages": report.messages_sent + bob_report.messages_sent,
         "cpu_s_alice": report.cpu_s,
         "cpu_s_bob": bob_report.cpu_s,
@@ -95,6 +122,14 @@ async def _run(
         "frames_dropped": _merge(a.stats.dropped, b.stats.dropped),
         "channel": asdict(channel.stats),
     }
+
+
+@functools.cache
+def _identities() -> tuple[Identity, Identity]:
+    """Alice's and Bob's certified identities for benchmark runs (made once per process)."""
+    with tempfile.TemporaryDirectory() as state:
+        fleet = make_fleet([(ALICE_NODE, "a"), (BOB_NODE, "b")], Path(state))
+    return fleet[ALICE_NODE].identity, fleet[BOB_NODE].identity
 
 
 def _merge(*counters: dict[str, int]) -> dict[str, int]:
@@ -113,10 +148,22 @@ def link_case(
     seed: int | None = None,
     limits: Limits | None = None,
     config: LinkConfig | None = None,
+    *,
+    authenticated: bool = True,
 ) -> dict[str, Any]:
-    """One comparison through the simulated link (virtual time)."""
+    """One comparison through the simulated link (virtual time); ``authenticated=False``
+    sends the protocol's messages in the clear (to measure what authentication adds)."""
     return run_simulated(
-        _run(case, party, link, impairments or Impairments(), seed, limits or Limits(), config)
+        _run(
+            case,
+            party,
+            link,
+            impairments or Impairments(),
+            seed,
+            limits or Limits(),
+            config,
+            authenticated,
+        )
     )
 
 
@@ -145,6 +192,8 @@ def _row(
         "frames_sent": med("frames_sent"),
         "frames_retransmitted": med("frames_retransmitted"),
         "bytes_on_air": med("bytes_on_air"),
+        "auth_bytes": med("auth_bytes"),
+        "message_bytes": med("bytes_alice_to_bob") + med("bytes_bob_to_alice"),
         "airtime_s": med("airtime_s"),
         "wall_s_simulated": med("wall_s_simulated"),
         "cpu_s": med("cpu_s_alice") + med("cpu_s_bob"),
@@ -208,6 +257,7 @@ def bench_link(
         },
         "grid_range": range_,
         "rows": rows,
+        "beacons": {n: [asdict(c) for c in beacon_costs(PROFILES[n])] for n in profiles},
     }
 
 
@@ -243,9 +293,13 @@ def format_link(result: dict[str, Any]) -> str:
         lines.append(f"| {name} | {p['frame_bytes']} | {share:.1%} | {duty} | {dwell} |")
     lines += [
         "",
+        "Runs are authenticated (signed key exchange on the first two messages, a 16-byte tag "
+        "on every message): 'auth B' is what that adds to the protocol's messages, and its "
+        "share of them.",
+        "",
         "| profile | loss | workload | correct | frames | retransmitted | frames vs 0 % "
-        "| airtime | simulated time |",
-        "|---|---:|---|---:|---:|---:|---:|---:|---:|",
+        "| auth B | airtime | simulated time |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     base: dict[tuple[str, str], float] = {}
     for r in result["rows"]:
@@ -253,11 +307,30 @@ def format_link(result: dict[str, Any]) -> str:
         if r["loss"] == 0:
             base[key] = r["frames_sent"]
         ratio = r["frames_sent"] / base[key] if key in base else float("nan")
+        added = r["auth_bytes"] / (r["message_bytes"] - r["auth_bytes"])
         lines.append(
             f"| {r['profile']} | {r['loss']:.0%} | {r['workload']} | {r['correct']}/{r['runs']} "
             f"| {r['frames_sent']:.0f} | {r['frames_retransmitted']:.0f} | {ratio:.2f}x "
+            f"| {r['auth_bytes']:.0f} (+{added:.1%}) "
             f"| {_duration(r['airtime_s'])} | {_duration(r['wall_s_simulated'])} |"
         )
+    lines += [
+        "",
+        "Beacons (payload bytes, frames, airtime each; share: of the channel's time, or of the "
+        "duty-cycle budget under EU868, if every beacon at the profile's interval -- 10 s, "
+        "stretched under a duty cycle -- were of that kind; most are tagged, a signed one goes "
+        "out at the start, when a new drone is heard and every 5 minutes, certificates when "
+        "asked for):",
+        "",
+        "| profile | beacon | bytes | frames | airtime | share |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+    for name, costs in result["beacons"].items():
+        for c in costs:
+            lines.append(
+                f"| {name} | {c['kind']} | {c['payload_bytes']} | {c['frames']} "
+                f"| {c['airtime_s'] * 1000:.0f} ms | {c['share']:.1%} |"
+            )
     return "\n".join(lines)
 
 

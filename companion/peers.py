@@ -79,6 +79,7 @@ class Peer:
     node: int
     beacon: Beacon
     heard_at: float
+    identity: bytes = b""  # the certified drone's fingerprint (companion.neighbours)
     speed_m_s: float = 0.0
     role: str | None = None  # "alice" or "bob" once this pair has met: roles then stay
     compared: tuple[int, int] | None = None  # (peer's, our) mission versions of the last run
@@ -127,6 +128,7 @@ def time_to_meet(
     peer_floor_m_s: float | None = None,
     now: float | None = None,
     silent_after_s: float = 0.0,
+    measured: bool = True,
 ) -> float:
     """Seconds until the two drones could meet.  With a fresh measurement (two beacons, the
     last one less than ``FRESH_S`` old; a turn shows within one interval) at the rate their
@@ -134,8 +136,9 @@ def time_to_meet(
     each at least ``floor_m_s`` (the peer ``peer_floor_m_s`` if given); a peer not heard
     for more than ``silent_after_s`` (longer than beacons are ever deferred) already that
     much closer for every second since (a peer that fell silent is not parked where it
-    was).  Infinite while they clearly fly apart."""
-    fresh = peer.measured and (now is None or now - peer.heard_at <= FRESH_S)
+    was).  Infinite while they clearly fly apart.  ``measured=False``: the worst case even
+    with a measurement (the earliest the peer *could* be here)."""
+    fresh = measured and peer.measured and (now is None or now - peer.heard_at <= FRESH_S)
     if fresh and peer.range_rate > SEPARATING_M_S:
         return math.inf
     distance = distance_m(own, peer.position)

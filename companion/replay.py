@@ -32,6 +32,7 @@ import logging
 import math
 import socket
 import sys
+import tempfile
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -41,8 +42,10 @@ from typing import Any
 from protocol.geometry import path_hits
 from protocol.grid import GridSpec
 
+from .auth.trust import UnknownPeers
 from .autopilot import Autopilot
 from .autopilots import personality
+from .beacon import UNAUTHENTICATED_SIZE
 from .failsafe import Action, FailsafeSettings
 from .flightpath import FlightPath, flight_path
 from .link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
@@ -55,6 +58,7 @@ from .mission import (
 from .missionfile import read_mission_file
 from .mock_autopilot import Faults, FlightModel, MockAutopilot
 from .planner import OffsetSettings
+from .replay_fleet import make_fleet
 from .replay_vehicles import MockVehicle, Px4SitlVehicle, ReplayVehicle
 from .runtime import Companion, CompanionSettings
 from .sim_px4 import Px4Build
@@ -103,6 +107,7 @@ class DroneSpec:
     faults: Faults = field(default_factory=Faults)  # of its mock autopilot
     companion_stop_s: float | None = None  # the companion vanishes at this simulated time
     hold_for_comparisons: bool = True  # on the ground, take-off waits for a running run
+    operator: str = "fleet"  # whose certificate it flies with
 
     @property
     def path(self) -> FlightPath:
@@ -127,6 +132,12 @@ class Scenario:
     grid_resolution_mm: int = 500
     lookahead_s: float = 60.0
     failsafe: Action = Action.CLIMB
+    untrusted_operators: frozenset[str] = frozenset()  # not in the other drones' trust stores
+    unknown_peers: UnknownPeers = UnknownPeers.IGNORE
+
+    def trusted_pair(self, a: DroneSpec, b: DroneSpec) -> bool:
+        """Both drones deconflict with each other (neither is of an untrusted operator)."""
+        return not {a.operator, b.operator} & self.untrusted_operators
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -181,6 +192,9 @@ def load_scenario(path: str | Path) -> Scenario:
         hold = raw.get("hold_for_comparisons", True)
         if not isinstance(hold, bool):
             raise ScenarioError(f"{where}: hold_for_comparisons must be true or false")
+        operator = raw.get("operator", "fleet")
+        if not isinstance(operator, str) or not operator:
+            raise ScenarioError(f"{where}: operator must be a name")
         drones.append(
             DroneSpec(
                 ident,
@@ -189,11 +203,21 @@ def load_scenario(path: str | Path) -> Scenario:
                 number(raw, "takeoff_delay_s", 0.0),
                 kind == "ardupilot",
                 hold_for_comparisons=hold,
+                operator=operator,
             )
         )
     failsafe = doc.get("failsafe", "climb")
     if failsafe not in {a.value for a in Action}:
         raise ScenarioError(f"{path}: failsafe must be one of climb, hold, off")
+    untrusted = doc.get("untrusted_operators", [])
+    if not isinstance(untrusted, list) or not all(isinstance(u, str) for u in untrusted):
+        raise ScenarioError(f"{path}: untrusted_operators must be a list of operator names")
+    if not {d.operator for d in drones} - set(untrusted):
+        raise ScenarioError(f"{path}: every operator is untrusted")
+    policies = {p.value: p for p in UnknownPeers}
+    policy = doc.get("unknown_peers", "ignore")
+    if policy not in policies:
+        raise ScenarioError(f"{path}: unknown_peers must be one of {', '.join(policies)}")
     return Scenario(
         name=path.stem,
         time_scale=time_scale,
@@ -209,6 +233,8 @@ def load_scenario(path: str | Path) -> Scenario:
         grid_resolution_mm=int(number(doc, "grid_resolution_mm", 500)) or 500,
         lookahead_s=number(doc, "lookahead_s", 60.0),
         failsafe=Action(failsafe),
+        untrusted_operators=frozenset(untrusted),
+        unknown_peers=policies[policy],
     )
 
 
@@ -269,6 +295,13 @@ async def run_replay(
     autopilots: list[Autopilot] = []
     flight = FlightModel(cruise_m_s=scenario.cruise_m_s, time_scale=ts, rate_hz=20.0)
     origin = time.monotonic()  # simulated time zero for every vehicle and the schedule
+    state = tempfile.TemporaryDirectory(prefix="replay-state-")
+    fleet = make_fleet(
+        [(d.id, d.operator) for d in scenario.drones],
+        Path(state.name),
+        untrusted=scenario.untrusted_operators,
+        unknown=scenario.unknown_peers,
+    )
 
     def say(message: str) -> None:
         if progress:
@@ -310,7 +343,7 @@ async def run_replay(
                 failsafe=FailsafeSettings(action=scenario.failsafe),
             )
             endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
-            companions[d.id] = Companion(settings, endpoint, ap)
+            companions[d.id] = Companion(settings, endpoint, ap, fleet[d.id])
             await companions[d.id].start()
             say(f"drone {d.id}: {vehicle.kind} vehicle, MAVSDK and companion up")
         origin = time.monotonic()  # simulated time zero: everything is up
@@ -354,6 +387,7 @@ async def run_replay(
                 held[k] = []
         for vehicle in mocks.values():
             await vehicle.stop()
+        state.cleanup()
     baseline = _fly_offline(scenario)
     return Replay(
         _report(scenario, mocks, held, companions | vanished, baseline, done, ts),
@@ -440,9 +474,12 @@ def _report(
         for d in scenario.drones
     }
     drones, false_alarms, precautions = [], 0, 0
+    specs = {d.id: d for d in scenario.drones}
     for d in scenario.drones:
         c = companions[d.id]
-        others = [p for k, p in paths.items() if k != d.id]
+        others = [
+            p for k, p in paths.items() if k != d.id and scenario.trusted_pair(d, specs[k])
+        ] or [[(0, 0), (0, 0)]]  # a drone nobody deconflicts with: nothing to flag
         plain = [any(h) for h in zip(*(path_hits(paths[d.id], o) for o in others), strict=True)]
         flagged = sorted(c.flagged)
         false_alarms += sum(1 for k in flagged if k < len(plain) and not plain[k])
@@ -451,9 +488,13 @@ def _report(
         ]
         precautions += len(precautionary)
         stats = c.endpoint.stats
+        run_auth = sum(
+            e.detail.get("auth_bytes", 0) for e in c.events if e.kind in ("result", "answered")
+        )
         drones.append(
             {
                 "id": d.id,
+                "operator": d.operator,
                 "autopilot": "ardupilot" if d.ardupilot else "px4",
                 "vehicle": mocks[d.id].kind,
                 "segments": d.path.segments,
@@ -474,29 +515,43 @@ def _report(
                 "bytes_sent": stats.bytes_sent,
                 "frames_sent": stats.frames_sent,
                 "airtime_s": round(stats.airtime_s, 3),
+                "auth": {  # what authentication costs on the radio (companion.auth)
+                    "run_bytes": run_auth,  # key exchange and tags of finished runs
+                    "beacon_bytes": c.beacon_bytes,  # beacon payloads sent, all kinds
+                    "beacons": dict(c.beacons_sent),
+                    # beyond unauthenticated 24-byte position beacons (payload bytes)
+                    "beacon_added_bytes": c.beacon_bytes
+                    - UNAUTHENTICATED_SIZE * (c.beacons_sent["signed"] + c.beacons_sent["tagged"]),
+                },
+                "untrusted_heard": [e.detail["drone"] for e in c.events if e.kind == "untrusted"],
+                "beacons_rejected": dict(c.rejected),
                 "max_altitude_m": round(
                     max((alt for *_, alt in mocks[d.id].trajectory), default=0.0), 2
                 ),
                 "vehicle_holds": _holds(held[d.id], d.mission, c.mission, d.ardupilot),
             }
         )
-    pairs, resolved, conflicts = [], 0, 0
+    pairs, resolved, conflicts, untrusted = [], 0, 0, 0
     ids = [d.id for d in scenario.drones]
     for i, a in enumerate(ids):
         for b in ids[i + 1 :]:
             crossing = any(path_hits(paths[a], paths[b]))
             with_companion, when, _, _ = _closest(mocks[a].trajectory, mocks[b].trajectory)
             without, _, _, _ = _closest(baseline[a], baseline[b])
+            trusted = scenario.trusted_pair(specs[a], specs[b])
             conflict = crossing and without < scenario.offset_m
-            acted = _acted(companions[a], b, when) or _acted(companions[b], a, when)
             # each vehicle holds its altitude to within its own accuracy
             tolerance = mocks[a].altitude_accuracy_m + mocks[b].altitude_accuracy_m
+            # a pair with an operator outside the trust store is deliberately not deconflicted
+            acted = trusted and (_acted(companions[a], b, when) or _acted(companions[b], a, when))
             ok = conflict and acted and (with_companion >= scenario.offset_m - tolerance)
-            conflicts += conflict
+            untrusted += conflict and not trusted
+            conflicts += conflict and trusted
             resolved += ok
             pairs.append(
                 {
                     "drones": [a, b],
+                    "trusted": trusted,
                     "paths_cross": crossing,
                     "conflict": conflict,
                     "acted": acted,
@@ -517,6 +572,7 @@ def _report(
         "pairs": pairs,
         "conflicts": conflicts,
         "conflicts_resolved": resolved,
+        "untrusted_conflicts": untrusted,  # with drones outside the trust stores: not handled
         "precautionary_actions": precautions,
         "false_alarms": false_alarms,
     }
@@ -559,13 +615,23 @@ def format_report(report: dict[str, Any]) -> str:
             what += f"; {len(d['precautionary'])} precautionary action(s)"
         if d["failures"]:
             what += f"; {len(d['failures'])} failure(s): {d['failures'][0]['kind']}"
+        if d["untrusted_heard"]:
+            what += f"; ignored {len(d['untrusted_heard'])} untrusted drone(s)"
+        auth = d["auth"]
         lines.append(
-            f"  drone {d['id']} ({VEHICLE_NAMES[d['vehicle'], d['autopilot']]}): {what}; radio "
-            f"{d['bytes_sent']} B in {d['frames_sent']} frames, "
-            f"{d['airtime_s']:.1f} s airtime"
+            f"  drone {d['id']} ({VEHICLE_NAMES[d['vehicle'], d['autopilot']]}, "
+            f"{d['operator']}): {what}; radio {d['bytes_sent']} B in {d['frames_sent']} frames, "
+            f"{d['airtime_s']:.1f} s airtime (authentication adds {auth['run_bytes']} B to "
+            f"runs, {auth['beacon_added_bytes']} B to beacons)"
         )
     for p in report["pairs"]:
         a, b = p["drones"]
+        if not p["trusted"]:
+            lines.append(
+                f"  drones {a}-{b}: not deconflicted (an operator outside the trust store); "
+                f"closest approach {p['closest_approach_m']:.1f} m"
+            )
+            continue
         verdict = (
             "resolved" if p["resolved"] else "NOT resolved" if p["conflict"] else "no conflict"
         )
@@ -578,6 +644,11 @@ def format_report(report: dict[str, Any]) -> str:
         f"  conflicts resolved {report['conflicts_resolved']}/{report['conflicts']}, "
         f"precautionary actions {report['precautionary_actions']}, "
         f"false alarms {report['false_alarms']}"
+        + (
+            f"; {report['untrusted_conflicts']} conflict(s) with untrusted drones NOT handled"
+            if report["untrusted_conflicts"]
+            else ""
+        )
     )
     return "\n".join(lines)
 

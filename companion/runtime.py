@@ -27,9 +27,9 @@ import math
 import random
 import secrets
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
-from protocol.budget import BudgetExceededError, RunBudget
 from protocol.errors import ProtocolError
 from protocol.grid import GridSpec
 from protocol.intersection import MAX_SEGMENTS, Alice, Bob, BobKeys, Limits
@@ -37,24 +37,45 @@ from protocol.ot.setup import DEFAULT_SECURITY, ChooserSetup, HolderSetup
 from protocol.suite_compact import message_sizes
 from protocol.wire import Hello, Suite
 
+from .auth.beacon_keys import BeaconKeys
+from .auth.session import (
+    BOOT_SIZE,
+    AuthenticationError,
+    Identity,
+    Init,
+    Initiator,
+    Refusal,
+    Responder,
+    Route,
+)
+from .auth.trust import TrustStore, UnknownPeers
 from .autopilot import Autopilot, AutopilotError
-from .beacon import SIZE as BEACON_SIZE
-from .beacon import Beacon, BeaconError, alice_of
-from .exchange import run_alice, serve_bob
+from .beacon import (
+    MAX_SIZE_CLASS,
+    Beacon,
+    CertBeacon,
+    alice_of,
+    keys_hash,
+    size_class,
+)
+from .beacon_budget import beacon_interval
+from .budget import ALICE, BOB, BudgetExceeded, RunLedger, RunLimits
+from .exchange import PeerRefused, run_alice, serve_bob
 from .failsafe import Action, FailsafeSettings, at_risk, run_seconds, too_late
 from .flightpath import FlightPath, flight_path
 from .levels import levels_mask, plan_levels
-from .link.arq import LinkError, PeerAborted
-from .link.endpoint import ABORT_PROTOCOL, ABORT_REFUSED, LinkEndpoint
-from .link.frames import OVERHEAD
+from .link.arq import LinkError
+from .link.endpoint import LinkEndpoint
+from .link.frames import AbortCode
 from .mission import MissionError, MissionItem, point_as_segment
+from .neighbours import NO_CERTIFICATE, Heard, Hearing, Neighbours
 from .peers import FRESH_S, Peer, distance_m, near_cut, time_to_meet
 from .planner import OffsetSettings, PlannerError, fixed_segments, plan_offsets
 from .radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
+from .state import OWN, StateStore
 
 log = logging.getLogger("companion")
 _JITTER = random.SystemRandom()
-UNKNOWN_SETUP = "unknown OT setup"
 SETUPS_PER_PEER = 2
 POSITION_RATE_HZ = 5.0  # telemetry position updates asked of the autopilot
 NEAR_SLACK_S = 30.0  # the near run reaches this far past the earliest possible meeting
@@ -62,6 +83,10 @@ NEAR_SEGMENTS = 2  # and each side compares at least its next two segments
 BOB_GUESS = 4  # Bob's size before he tells it: a remaining route of a few legs (m x m would
 # stretch the horizon of a long route over everything; the run watch uses his real size)
 QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a full run
+GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet channel
+SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one)
+ASKED_AGAIN = 0.5  # asked for, a certificate or signed beacon at most every half interval
+ALERT_EVERY_S = 60.0  # an untrusted drone is reported at most this often (policy "alert")
 
 
 @dataclass(frozen=True)
@@ -76,13 +101,25 @@ class CompanionSettings:
     initiation_range_m: float = 5000.0
     grid_resolution_mm: int = 500
     grid_radius_m: float = 500.0  # smallest comparison box; doubled until it holds Alice's path
-    max_runs_per_peer: int = 8
+    max_runs_per_peer: int = 8  # runs a certified drone may ask of us per window
+    max_runs_total: int = 64  # runs all peers together may ask of us per window
     run_window_s: float = 3600.0
+    max_clock_skew_s: float = 30.0  # beacons and run requests further off our clock: refused
     run_timeout_s: float | None = None
     retry_after_s: float = 30.0
     lookahead_s: float = 60.0  # the near run covers at least this much flight (0: no near run)
     cruise_m_s: float = 10.0  # speed assumed for the look-ahead when nothing better is known
     failsafe: FailsafeSettings = field(default_factory=FailsafeSettings)
+
+
+@dataclass(frozen=True)
+class Credentials:
+    """Who the companion is (its key and its operator's certificate), whom it deconflicts
+    with (the trust store) and where it keeps what must survive a restart."""
+
+    identity: Identity
+    trust: TrustStore
+    state_dir: Path
 
 
 @dataclass
@@ -122,17 +159,51 @@ def box_radius_m(path: list[tuple[int, int]], centre: tuple[int, int], minimum: 
 
 class Companion:
     def __init__(
-        self, settings: CompanionSettings, endpoint: LinkEndpoint, autopilot: Autopilot
+        self,
+        settings: CompanionSettings,
+        endpoint: LinkEndpoint,
+        autopilot: Autopilot,
+        credentials: Credentials,
     ) -> None:
         self.settings = settings
         self.endpoint = endpoint
         self.autopilot = autopilot
         self.clock = endpoint.clock
+        self.identity = credentials.identity
+        if self.identity.cert.node != settings.node:
+            raise ValueError(
+                f"the certificate is for node {self.identity.cert.node}, not {settings.node}"
+            )
         self.bob_keys = BobKeys.generate() if settings.suite is Suite.PAPER else None
-        self.instance = secrets.token_bytes(8)
+        self.boot = secrets.token_bytes(BOOT_SIZE)  # new at every start: peers drop our setups
+        self.beacon_keys = BeaconKeys()  # new at every start too
+        public = self.bob_keys.public_bytes() if self.bob_keys is not None else b""
+        self.keys_hash = keys_hash(self.boot, self.beacon_keys.public, public)
+        self.store = StateStore(credentials.state_dir)
+        self.neighbours = Neighbours(
+            credentials.trust,
+            self.store,
+            self.identity.cert,
+            self.beacon_keys,
+            settings.max_clock_skew_s,
+        )
+        self.ledger = RunLedger(
+            self.store,
+            RunLimits(settings.max_runs_per_peer, settings.max_runs_total, settings.run_window_s),
+        )
+        self._order: int | None = None  # (time, counter) of our last beacon
+        self._cert_sent = -math.inf
+        self._unknown_refused = -math.inf
+        self._signed_at = -math.inf  # our last signed beacon
+        self._sign_next = True  # the next beacon is a signed one
+        self._cert_wanted = False
+        self._ignored: set[bytes] = set()  # untrusted drones logged already
+        self._alerted: dict[int, float] = {}
+        self.rejected: dict[str, int] = {}  # beacons dropped, by reason
+        self.beacon_bytes = 0  # beacon payloads we sent (position and certificate)
+        self.beacons_sent = {"signed": 0, "tagged": 0, "certificate": 0}
         self.holder_setups: dict[int, HolderSetup] = {}  # peer -> ours as Alice
         self.chooser_setups: dict[int, dict[bytes, ChooserSetup]] = {}  # peer -> ours as Bob
-        self.budget = RunBudget(settings.max_runs_per_peer, settings.run_window_s)
         self.peers: dict[int, Peer] = {}
         self.events: list[Event] = []
         self.original: list[MissionItem] = []
@@ -154,10 +225,13 @@ class Companion:
         self._edit_lock = asyncio.Lock()
         self._wake = asyncio.Event()
         self._beacon_now = asyncio.Event()
+        self._cert_now = asyncio.Event()
+        self._cert_now.set()  # our certificate, then a signed beacon: peers can check us at once
         self._sessions = 0  # runs on the air (as Alice or Bob)
         self._answering = 0  # runs we answer as Bob
         self._holding: set[int] = set()  # peers we hold for
         self._running: tuple[int, float] | None = None  # our run's peer, its expected end
+        self._ground_wait: float | None = None  # since when a run waits for a quiet channel
         self.epoch = 0.0
 
     # ------------------------------------------------------------------ lifecycle
@@ -188,6 +262,7 @@ class Companion:
         self._tasks = [
             asyncio.create_task(self._telemetry(), name="telemetry"),
             asyncio.create_task(self._progress(), name="progress"),
+            asyncio.create_task(self._certificates(), name="certificates"),
             asyncio.create_task(self._beacons(), name="beacons"),
             asyncio.create_task(self._listen(), name="listen"),
             asyncio.create_task(self._serve(), name="serve"),
@@ -199,11 +274,6 @@ class Companion:
         task = asyncio.create_task(work)
         self._children.add(task)
         task.add_done_callback(self._children.discard)
-
-    def _budget_key(self, node: int) -> bytes:
-        """Runs are counted per peer: its node id and the instance it beacons."""
-        peer = self.peers.get(node)
-        return node.to_bytes(2, "big") + (peer.beacon.instance if peer else b"")
 
     async def stop(self) -> None:
         for task in [*self._tasks, *self._children]:
@@ -217,6 +287,7 @@ class Companion:
                 except Exception as exc:  # a task that failed has nothing left to stop
                     log.warning("node %d: task %s ended with %r", self.settings.node, task, exc)
         await self.endpoint.close()
+        self.store.close()
 
     @property
     def comparing(self) -> bool:
@@ -272,28 +343,86 @@ class Companion:
 
     # ------------------------------------------------------------------ radio
 
-    def _beacon(self) -> Beacon:
+    def _stamp(self) -> tuple[int, int]:
+        """(time, counter) of our next beacon: together they only ever grow, also across
+        restarts (the last pair is kept on disk), so a peer never takes a fresh beacon of
+        ours for a replay."""
+        now = int(self.clock.wall()) << 8
+        if self._order is None:  # the first beacon of this start
+            self._order = self.store.last_counter(OWN) or 0
+        self._order = max(self._order + 1, now)
+        self.store.set_counter(OWN, self._order)
+        return self._order >> 8, self._order & 0xFF
+
+    def _beacon(self) -> tuple[bytes, str]:
+        """Our position beacon (:mod:`companion.beacon`): signed when one is due (it carries
+        our beacon key and keys hash), else tagged for every neighbour we share a key with."""
         lat, lon, alt = self.position
-        return Beacon(
+        _, path = self._remaining_path()
+        segments = Limits().padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
+        time_s, counter = self._stamp()
+        beacon = Beacon(
             lat,
             lon,
             round(alt),
             self.on_ground,
             frozenset({self.settings.suite}),
             self.version,
-            self.instance,
+            time_s,
+            counter,
             levels_mask(self.levels),
+            size_class(segments),
         )
+        now = self.clock.now()
+        tags = self.neighbours.tag_keys(self.clock.wall() - self._silence_s)
+        if self._sign_next or now - self._signed_at >= SIGNED_EVERY_S:
+            self._sign_next, self._signed_at = False, now
+            signed = beacon.signed(
+                self.settings.node, self.identity.key, self.beacon_keys.public, self.keys_hash, tags
+            )
+            return signed, "signed"
+        return beacon.tagged(self.settings.node, tags), "tagged"
+
+    def _want_signed(self) -> None:
+        """A signed beacon next (rate-limited): somebody lacks our beacon key."""
+        if self.clock.now() - self._signed_at >= self._asked_every_s:
+            self._sign_next = True
+            self._beacon_now.set()
 
     @property
     def beacon_interval(self) -> float:
         """The configured interval, stretched on duty-cycled links so beacons use at most
-        5 % of the budget (EU868 SF9: one beacon per ~11 minutes)."""
-        profile = self.endpoint.profile
-        if profile.duty_cycle is None:
-            return self.settings.beacon_interval_s
-        airtime = profile.airtime(OVERHEAD + BEACON_SIZE)
-        return max(self.settings.beacon_interval_s, airtime / (0.05 * profile.duty_cycle))
+        5 % of the budget (EU868 SF9: one beacon per ~5 minutes)."""
+        return beacon_interval(self.endpoint.profile, self.settings.beacon_interval_s)
+
+    @property
+    def _asked_every_s(self) -> float:
+        """How often we answer requests for our certificate or signed beacon (and refuse
+        runs of drones we do not know yet): every half *configured* beacon interval, at least
+        2 s -- not the interval a duty cycle stretches to minutes: discovery must not wait
+        for that (the duty-cycle budget itself spaces the frames)."""
+        return max(2.0, ASKED_AGAIN * self.settings.beacon_interval_s)
+
+    async def _send_beacon(self, payload: bytes, kind: str) -> None:
+        with contextlib.suppress(LinkError):
+            await self.endpoint.beacon(payload)
+            self.beacon_bytes += len(payload)
+            self.beacons_sent[kind] += 1
+
+    async def _certificates(self) -> None:
+        """Our certificate beacon: at the start, when we hear a drone we cannot check yet
+        (asking for its certificate and signed beacon: WANT) and when a peer asks for ours --
+        at most every half a beacon interval (a stranger's made-up beacons cost us at most
+        that)."""
+        while True:
+            await self._cert_now.wait()
+            wait = self._cert_sent + self._asked_every_s - self.clock.now()
+            # an answer right after the question would meet the asker's next frame
+            await self.clock.sleep(max(wait, 0.0) + _JITTER.uniform(0.1, 1.0))
+            self._cert_now.clear()
+            want, self._cert_wanted = self._cert_wanted, False
+            self._cert_sent = self.clock.now()
+            await self._send_beacon(CertBeacon(self.identity.cert, want).encode(), "certificate")
 
     async def _beacons(self) -> None:
         """Beacon every interval (random phase and jitter: drones that beacon in lockstep
@@ -313,36 +442,100 @@ class Companion:
                 deferred += 1
             elif self.position[:2] != (0, 0):
                 deferred = 0
-                with contextlib.suppress(LinkError):
-                    await self.endpoint.beacon(self._beacon().encode())
+                await self._send_beacon(*self._beacon())
             wait = self.beacon_interval * _JITTER.uniform(0.7, 1.3)
 
     async def _listen(self) -> None:
         while True:
             src, payload = await self.endpoint.beacons.get()
-            try:
-                beacon = Beacon.decode(payload)
-            except BeaconError as exc:
-                log.debug("bad beacon from %d: %s", src, exc)
+            if src == self.settings.node:
                 continue
-            now = self.clock.now()
-            peer = self.peers.get(src)
-            if peer is None:
-                peer = self.peers[src] = Peer(src, beacon, now)
-                self.record("peer", peer=src, on_ground=beacon.on_ground)
-                self._beacon_now.set()  # let it hear us without waiting an interval
-            elif peer.beacon.instance != beacon.instance:
-                # The peer restarted: the setups we shared are gone on its side.
-                self.holder_setups.pop(src, None)
-                self.chooser_setups.pop(src, None)
-            levels_changed = peer.beacon.levels != beacon.levels
-            peer.heard(beacon, now, self.position[:2])
-            if levels_changed and (peer.conflicts or src in self.precaution):
-                self._spawn(self._replan(f"peer {src} announced levels {beacon.levels:#04x}"))
-            self._wake.set()
+            self._heard(self.neighbours.hear(src, payload, self.clock.wall()))
+
+    def _heard(self, hearing: Hearing) -> None:
+        """Act on one beacon: only a verified beacon of a trusted drone makes or moves a peer."""
+        src = hearing.node
+        if hearing.kind is Heard.REJECTED:
+            self.rejected[hearing.reason] = self.rejected.get(hearing.reason, 0) + 1
+            log.debug(
+                "node %d: beacon from %d dropped: %s", self.settings.node, src, hearing.reason
+            )
+            return
+        if hearing.kind is Heard.UNKNOWN:
+            if hearing.reason == NO_CERTIFICATE:  # ask for it (ours goes with the question)
+                self._cert_wanted = True
+                self._cert_now.set()
+            # Its beacon key or its tag for us is missing: with our signed beacon it gets our
+            # key (and tags for us), and it answers a new key with its own signed beacon.
+            self._want_signed()
+            return
+        if hearing.kind is Heard.UNTRUSTED:
+            self._untrusted(hearing)
+            return
+        if hearing.kind is Heard.CERTIFICATE:
+            if hearing.want:  # it cannot check somebody's beacons: ours, perhaps
+                self._cert_now.set()
+                self._want_signed()
+            if hearing.then is not None:  # its signed beacon, heard before the certificate
+                self._heard(hearing.then)
+            return
+        beacon, neighbour = hearing.beacon, hearing.neighbour
+        assert beacon is not None and neighbour is not None
+        if hearing.new_keys:  # a new beacon key: it may lack ours
+            self._want_signed()
+        now = self.clock.now()
+        peer = self.peers.get(src)
+        if peer is not None and peer.identity != neighbour.fingerprint:
+            self._forget(src)  # another drone holds this node id now
+            peer = None
+        if peer is None:
+            peer = self.peers[src] = Peer(src, beacon, now, identity=neighbour.fingerprint)
+            self.record(
+                "peer", peer=src, on_ground=beacon.on_ground, drone=neighbour.fingerprint.hex(),
+                operator=neighbour.operator.name,
+            )  # fmt: skip
+            self._beacon_now.set()  # let it hear us without waiting an interval
+        elif hearing.new_keys:
+            # The peer restarted (a new beacon key): the setups we shared are gone on its side.
+            self.holder_setups.pop(src, None)
+            self.chooser_setups.pop(src, None)
+        levels_changed = peer.beacon.levels != beacon.levels
+        peer.heard(beacon, now, self.position[:2])
+        if levels_changed and (peer.conflicts or src in self.precaution):
+            self._spawn(self._replan(f"peer {src} announced levels {beacon.levels:#04x}"))
+        self._wake.set()
+
+    def _forget(self, node: int) -> None:
+        self.peers.pop(node, None)
+        self.holder_setups.pop(node, None)
+        self.chooser_setups.pop(node, None)
+
+    def _untrusted(self, hearing: Hearing) -> None:
+        """A drone the trust store does not accept: never deconflicted with; logged once, and
+        with policy ``alert`` reported as an intruder (at most every ALERT_EVERY_S)."""
+        cert = hearing.cert
+        drone = cert.fingerprint if cert is not None else hearing.node.to_bytes(2, "big")
+        if drone not in self._ignored:
+            self._ignored.add(drone)
+            self.record("untrusted", peer=hearing.node, drone=drone.hex(), reason=hearing.reason)
+        if self.neighbours.trust.unknown is not UnknownPeers.ALERT or hearing.beacon is None:
+            return
+        now = self.clock.now()
+        if now - self._alerted.get(hearing.node, -math.inf) >= ALERT_EVERY_S:
+            self._alerted[hearing.node] = now
+            b = hearing.beacon
+            distance = distance_m(self.position[:2], (b.lat, b.lon))
+            self.record(
+                "intruder", peer=hearing.node, drone=drone.hex(), lat=b.lat, lon=b.lon,
+                alt_m_amsl=b.alt_m, distance_m=round(distance),
+            )  # fmt: skip
 
     def _should_compare(self, peer: Peer, now: float) -> bool:
-        return now >= peer.next_try and self._pending(peer)
+        """Pending, not waiting for a retry, and the peer can check our requests: its tagged
+        beacons carry a tag for us (it holds our beacon key, so it heard us)."""
+        neighbour = self.neighbours.get(peer.node)
+        knows_us = neighbour is not None and neighbour.knows_us
+        return now >= peer.next_try and knows_us and self._pending(peer)
 
     def _pending(self, peer: Peer) -> bool:
         """We are Alice for this peer, it is in range, and its paths are not compared yet."""
@@ -411,6 +604,15 @@ class Companion:
             # A full run after a near run waits until it is needed (or the channel is quiet):
             # meanwhile the radio serves every drone's near runs.
             quiet = not self.endpoint.busy(QUIET_S) and not self._radio.waiting()
+            if self.on_ground and not quiet:
+                # Before take-off nothing is urgent, and a run started while other drones'
+                # run is on the air slows theirs (in flight, perhaps past their deadline):
+                # wait for a quiet channel, a minute at most.
+                if self._ground_wait is None:
+                    self._ground_wait = now
+                if now - self._ground_wait < GROUND_WAIT_S:
+                    continue
+            self._ground_wait = None
             ready = [p for p in due if p.plan[0][0] == "near" or p.full_after <= now or quiet]
             if not ready:
                 continue
@@ -505,7 +707,8 @@ class Companion:
         # Nothing can happen before the peer could be here (both at cruise speed at least);
         # reach well past that moment.
         cruise = self.settings.cruise_m_s
-        meet = time_to_meet(self.position[:2], speed, peer, floor_m_s=cruise) + NEAR_SLACK_S
+        meet = time_to_meet(self.position[:2], speed, peer, floor_m_s=cruise, measured=False)
+        meet += NEAR_SLACK_S
         meet = meet if math.isfinite(meet) else 0.0
         seconds = max(self.settings.lookahead_s, runs + self.settings.failsafe.margin_s, meet)
         return round(seconds * speed)
@@ -527,10 +730,16 @@ class Companion:
         path = self._near(path, horizon)
         if len(path) < 2:
             return True
-        now = self.clock.now()
+        neighbour = self.neighbours.get(peer.node)
+        if neighbour is None or neighbour.fingerprint != peer.identity:
+            self._forget(peer.node)  # its certificate is gone or taken over: not our peer
+            return False
+        op = neighbour.operator
         try:
-            self.budget.admit(self._budget_key(peer.node), now)
-        except BudgetExceededError as exc:
+            self.ledger.admit(
+                peer.identity, op.key.fingerprint, op.max_runs_per_hour, self.clock.wall(), ALICE
+            )
+        except BudgetExceeded as exc:
             self.record("budget", peer=peer.node, error=str(exc))
             return False
         peer.role = "alice"
@@ -566,20 +775,38 @@ class Companion:
                 await self._precaution(peer, needed, meet)
             watchdog = asyncio.create_task(self._watch(peer, alice, grid, needed))
             self._sessions += 1
+
+            def secure(session: int, cert: Any = neighbour.cert) -> Initiator:
+                route = Route(self.settings.node, peer.node, session)
+                return Initiator(self.identity, cert, route, self.clock.wall())
+
             try:
                 report = await run_alice(
-                    self.endpoint, peer.node, alice, timeout=self.settings.run_timeout_s
+                    self.endpoint,
+                    peer.node,
+                    alice,
+                    secure=secure,
+                    check_keys=lambda boot, public: (
+                        neighbour.beacon_key is not None
+                        and keys_hash(boot, neighbour.beacon_key, public) == neighbour.keys_hash
+                    ),
+                    timeout=self.settings.run_timeout_s,
                 )
-            except PeerAborted as exc:
-                if exc.code == ABORT_PROTOCOL and UNKNOWN_SETUP in exc.text and attempt == 0:
+            except PeerRefused as exc:
+                if exc.code is Refusal.UNKNOWN_SETUP and attempt == 0:
                     self.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
                     self.record("setup_renewed", peer=peer.node)
                     continue
-                if exc.code == ABORT_REFUSED and "role" in exc.text:
+                if exc.code is Refusal.ROLE:
                     peer.role = "bob"  # the peer already resolved this pair as Alice
                     self.record("yielded", peer=peer.node, reason="the peer is Alice")
                     return False
-                self.record("run_failed", peer=peer.node, phase=phase, error=str(exc))
+                if exc.code is Refusal.UNKNOWN_PEER:
+                    self._cert_now.set()  # it lacks our certificate: beacon it
+                self.record("run_failed", peer=peer.node, phase=phase, refused=exc.code.name)
+                return False
+            except AuthenticationError as exc:
+                self.record("run_failed", peer=peer.node, phase=phase, auth=str(exc))
                 return False
             except (ProtocolError, LinkError, ValueError) as exc:
                 self.record("run_failed", peer=peer.node, phase=phase, error=str(exc))
@@ -607,6 +834,7 @@ class Companion:
             first_segment=start,
             flagged=sorted(flagged),
             bytes=report.bytes_sent,
+            auth_bytes=report.auth_bytes_sent,
             cpu_s=round(report.cpu_s, 3),
             run_s=round(report.wall_s, 1),
         )
@@ -820,33 +1048,19 @@ class Companion:
         return point_as_segment(self._near(path, hello.horizon_m))  # hovering: a point
 
     async def _answer(self, peer: int, session: int) -> None:
-        known = self.peers.get(peer)
-        if known is not None and known.role == "alice":
-            if self.settings.node < peer:
-                # Both took the pair as Alice (their views of who was on the ground crossed):
-                # exactly one of a pair adjusts -- the lower node id keeps the role.
-                self.endpoint.abort(peer, session, ABORT_REFUSED, "role: already Alice")
-                self.record("refused", peer=peer, reason="already Alice for this pair")
-                return
-            self.record("yielded", peer=peer, reason="the peer has the lower node id")
-        if known is not None:
-            known.role = "bob"
-            known.conflicts.clear()  # as Bob we do not adjust for this peer
-        try:
-            self.budget.admit(self._budget_key(peer), self.clock.now())
-        except BudgetExceededError as exc:
-            self.endpoint.abort(peer, session, ABORT_REFUSED, "run budget")
-            self.record("budget", peer=peer, error=str(exc))
-            return
+        """Answer a run request -- only once it has shown who asks (a trusted certificate, a
+        signature, a fresh time, not a replay) and that the run is plausible and within the
+        budget: nobody else makes us work, and what goes back is a one-byte abort code or a
+        signed refusal, never anything about our path."""
         setups = self.chooser_setups.setdefault(peer, {})
         self._answering += 1
         try:
-            hello = await self.endpoint.receive(peer, session)
-            try:
-                near = Hello.from_bytes(hello).horizon_m > 0
-            except ProtocolError:
-                near = False  # the machine will refuse it with the reason
-            async with self._radio.turn(ANSWER_NEAR if near else ANSWER_FULL):
+            request = await self.endpoint.receive(peer, session)
+            admitted = await self._admit(peer, session, request)
+            if admitted is None:
+                return
+            responder, hello = admitted
+            async with self._radio.turn(ANSWER_NEAR if hello.horizon_m > 0 else ANSWER_FULL):
                 self._sessions += 1
                 try:
                     bob = Bob(self._bob_path, keys=self.bob_keys, setups=setups, geographic=True)
@@ -855,11 +1069,16 @@ class Companion:
                         peer,
                         session,
                         bob,
+                        secure=responder,
+                        boot=self.boot,
                         timeout=self.settings.run_timeout_s,
-                        first=hello,
+                        first=responder.init.hello,
                     )
                 finally:
                     self._sessions -= 1
+        except AuthenticationError as exc:
+            self.record("answer_failed", peer=peer, auth=str(exc))
+            return
         except (ProtocolError, LinkError, ValueError) as exc:
             self.record("answer_failed", peer=peer, error=str(exc))
             return
@@ -872,4 +1091,92 @@ class Companion:
             self._wake.set()
             while len(setups) > SETUPS_PER_PEER:  # the oldest go first
                 setups.pop(next(iter(setups)))
-        self.record("answered", peer=peer, bytes=report.bytes_sent)
+        if report.refused is not None:
+            self.record("refused", peer=peer, reason=report.refused.name)
+            return
+        self.record(
+            "answered", peer=peer, bytes=report.bytes_sent, auth_bytes=report.auth_bytes_sent
+        )
+
+    async def _admit(
+        self, peer: int, session: int, request: bytes
+    ) -> tuple[Responder, Hello] | None:
+        """The checks before any work on a request, cheapest first.  None: the request was
+        dropped, aborted (code only) or refused (signed), and the session is closed."""
+        wall = self.clock.wall()
+        skew = self.settings.max_clock_skew_s
+        try:
+            init = Init.parse(request)
+        except AuthenticationError as exc:
+            self.endpoint.abort(peer, session, AbortCode.AUTH)
+            self.record("answer_failed", peer=peer, auth=str(exc))
+            return None
+        responder = Responder(self.identity, init, Route(peer, self.settings.node, session))
+        neighbour = self.neighbours.get(peer)
+        known = self.peers.get(peer)
+        if neighbour is None or known is None or known.identity != neighbour.fingerprint:
+            if self.neighbours.untrusted(peer):  # ignored: not a word back
+                self.endpoint.close_session(peer, session)
+                return None
+            # A drone whose certificate (or beacon) we lack: say so -- signed, at most every
+            # half a beacon interval -- and ask for its certificate.
+            self._cert_wanted = True
+            self._cert_now.set()
+            if self.clock.now() - self._unknown_refused >= self._asked_every_s:
+                self._unknown_refused = self.clock.now()
+                await self._refuse(peer, session, responder, Refusal.UNKNOWN_PEER)
+            else:
+                self.endpoint.close_session(peer, session)
+            return None
+        # Fresh: made when its first frame could have left (a duty-cycled sender may wait
+        # up to a window for its budget); answered once (the replay cache on disk outlives
+        # the window).
+        wait = self.endpoint.profile.duty_window_s if self.endpoint.profile.duty_cycle else 0.0
+        arrived = wall - (self.clock.now() - self.endpoint.arrived(peer, session))
+        try:
+            responder.verify(neighbour.cert, arrived, skew, wait)
+            forget = wall - 2 * (skew + wait)
+            if not self.store.first_request(init.replay_key, wall, forget):
+                raise AuthenticationError("a request answered before (a replay)")
+        except AuthenticationError as exc:
+            self.endpoint.abort(peer, session, AbortCode.AUTH)
+            self.record("answer_failed", peer=peer, auth=str(exc))
+            return None
+        try:
+            hello = Hello.from_bytes(init.hello)
+        except ProtocolError as exc:
+            self.endpoint.abort(peer, session, AbortCode.PROTOCOL)
+            self.record("answer_failed", peer=peer, error=str(exc))
+            return None
+        if known.role == "alice":
+            if self.settings.node < peer:
+                # Both took the pair as Alice (their views of who was on the ground crossed):
+                # exactly one of a pair adjusts -- the lower node id keeps the role.
+                await self._refuse(peer, session, responder, Refusal.ROLE)
+                return None
+            self.record("yielded", peer=peer, reason="the peer has the lower node id")
+        operator = neighbour.operator
+        allowed = min(operator.max_segments, 1 << min(known.beacon.size_class, MAX_SIZE_CLASS))
+        if hello.m > allowed:  # more than its beacon announced or its operator allows
+            await self._refuse(peer, session, responder, Refusal.SIZE)
+            return None
+        try:
+            self.ledger.admit(
+                known.identity, operator.key.fingerprint, operator.max_runs_per_hour, wall, BOB
+            )
+        except BudgetExceeded as exc:
+            self.record("budget", peer=peer, error=str(exc))
+            await self._refuse(peer, session, responder, Refusal.BUDGET)
+            return None
+        known.role = "bob"
+        known.conflicts.clear()  # as Bob we do not adjust for this peer
+        return responder, hello
+
+    async def _refuse(self, peer: int, session: int, responder: Responder, code: Refusal) -> None:
+        self.record("refused", peer=peer, reason=code.name)
+        try:
+            await self.endpoint.send(peer, session, responder.refuse(code))
+        except LinkError:
+            pass
+        finally:
+            self.endpoint.close_session(peer, session)

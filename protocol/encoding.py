@@ -52,6 +52,11 @@ class Reader:
     def remaining(self) -> int:
         return len(self._data) - self._pos
 
+    @property
+    def offset(self) -> int:
+        """Bytes consumed so far."""
+        return self._pos
+
     def finish(self) -> None:
         """Require that everything was consumed."""
         if self._pos != len(self._data):

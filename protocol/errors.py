@@ -30,3 +30,8 @@ class InsecureParametersError(LocalProtocolError):
 
 class InputRangeError(LocalProtocolError):
     """A local input (coordinate, path length, grid parameter) is outside what is supported."""
+
+
+class UnknownSetupError(RemoteProtocolError):
+    """The peer's hello names an OT setup this party does not hold (it restarted, or dropped
+    it): the peer should start a fresh one."""

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from dataclasses import dataclass
 from fractions import Fraction
 
 Point = tuple[int, int]
@@ -93,11 +94,20 @@ def projection_key(a: Point, b: Point, span: int) -> tuple[int, int, int, int]:
     return ex, ey, -(ex * a[0] + ey * a[1]), ex * ex + ey * ey
 
 
-def comparison_bits(a: Point, b: Point, c: Point, d: Point, span: int) -> list[int]:
+def comparison_bits(
+    a: Point, b: Point, c: Point, d: Point, span: int, line: tuple[int, int, int] | None = None
+) -> list[int]:
     """The input bits of :func:`protocol.pathcircuit.segments_meet` for one segment pair:
-    P, Z of o1 .. o4, then L, H of t_C and t_D."""
+    P, Z of o1 .. o4, then L, H of t_C and t_D.  ``line``: the (dX, dY, K) Bob sends for his
+    segment (default: :func:`segment_terms` of c, d), from which o3 and o4 are computed."""
+    dx, dy, k = segment_terms(c, d) if line is None else line
     bits = []
-    for o in (orient(a, b, c), orient(a, b, d), orient(c, d, a), orient(c, d, b)):
+    for o in (
+        orient(a, b, c),
+        orient(a, b, d),
+        a[1] * dx - a[0] * dy + k,
+        b[1] * dx - b[0] * dy + k,
+    ):
         bits += [int(o > 0), int(o == 0)]
     ex, ey, off, t_max = projection_key(a, b, span)
     for p in (c, d):
@@ -108,6 +118,13 @@ def comparison_bits(a: Point, b: Point, c: Point, d: Point, span: int) -> list[i
 
 def circuit(a: Point, b: Point, c: Point, d: Point, span: int) -> int:
     """The protocol's circuit (:mod:`protocol.pathcircuit`) evaluated on plain bits."""
+    return circuit_with_line(a, b, c, d, segment_terms(c, d), span)
+
+
+def circuit_with_line(
+    a: Point, b: Point, c: Point, d: Point, line: tuple[int, int, int], span: int
+) -> int:
+    """The circuit on plain bits with Bob's segment sent as ``line`` (a link's, say)."""
     from .circuit import Circuit
     from .pathcircuit import Orient, Proj, segments_meet
 
@@ -117,7 +134,7 @@ def circuit(a: Point, b: Point, c: Point, d: Point, span: int) -> int:
     c_.output(
         segments_meet(c_, o1, o2, o3, o4, Proj(wires[8], wires[9]), Proj(wires[10], wires[11]))
     )
-    return c_.evaluate(comparison_bits(a, b, c, d, span))[0]
+    return c_.evaluate(comparison_bits(a, b, c, d, span, line))[0]
 
 
 # --------------------------------------------------------------------------- the public box
@@ -149,58 +166,79 @@ def _round_in(point: FPoint, r: int) -> Point:
     return (max(-r, min(r, round(point[0]))), max(-r, min(r, round(point[1]))))
 
 
-def _perimeter(p: Point, r: int) -> int:
-    """Position of a boundary point along the box edge, counter-clockwise from (r, -r)."""
-    x, y = p
-    if x == r:
-        return y + r
-    if y == r:
-        return 2 * r + (r - x)
-    if x == -r:
-        return 4 * r + (r - y)
-    return 6 * r + (x + r)
+DEAD_LINE = (0, 0, 1)  # (dX, dY, K) of a link: orient(C, D, A) = 1 for every A, never a hit
 
 
-def _walk(p: Point, q: Point, r: int) -> list[Point]:
-    """Corners passed going from boundary point p to boundary point q the shorter way."""
-    corners = [(r, r), (-r, r), (-r, -r), (r, -r)]  # at perimeter 2r, 4r, 6r, 8r = 0
-    total = 8 * r
-    a, b = _perimeter(p, r), _perimeter(q, r)
-    forward = (b - a) % total
-    out = []
-    if forward <= total - forward:
-        for k, corner in enumerate(corners):
-            if 0 < (2 * r * (k + 1) - a) % total < forward:
-                out.append(corner)
-        out.sort(key=lambda c: (_perimeter(c, r) - a) % total)
-    else:
-        for k, corner in enumerate(corners):
-            if 0 < (a - 2 * r * (k + 1)) % total < total - forward:
-                out.append(corner)
-        out.sort(key=lambda c: (a - _perimeter(c, r)) % total)
-    return out
+@dataclass(frozen=True, slots=True)
+class BobPath:
+    """Bob's path as the protocol takes it: ``points`` on the grid (inside the public box,
+    padded to the public size n), and which segments are *links* between separate pieces.
 
-
-def clip_to_box(path: Sequence[Point], r: int) -> tuple[Point, ...]:
-    """Bob's path as far as it lies in the public box [-r, r]^2.
-
-    Segments inside are kept exactly.  A segment that leaves the box is cut at the edge and the
-    cut point rounded to the grid (at most half a cell, as every waypoint is); where the path is
-    outside, it is replaced by a walk along the edge, which Alice's path (inside the box) can
-    only touch where it reaches the edge itself -- a false alarm at worst, never a missed
-    crossing.  A path entirely outside becomes the single corner (r, r).
+    A link k keeps vertices k and k + 1 where the pieces end and begin but sends the line
+    terms :data:`DEAD_LINE` instead of its own: every orient(C, D, A_j) is then 1, so s34 = 0
+    and col = 0 in :mod:`protocol.pathcircuit` and the pair never meets -- a link costs one
+    segment of the public size and shows nothing.  ``everywhere``: Bob could not fit his path
+    into n segments; the protocol then answers *meets* for every one of Alice's segments
+    (segment 0 is a link and Bob's flag input turns its wire to 1): a false alarm, never a
+    missed crossing, in a run that looks like any other.
     """
-    if all(abs(x) <= r and abs(y) <= r for x, y in path):
-        return tuple(path)
-    out: list[Point] = []
+
+    points: tuple[Point, ...]
+    links: frozenset[int] = frozenset()
+    everywhere: bool = False
+
+    @property
+    def segments(self) -> int:
+        return len(self.points) - 1
+
+    def line(self, k: int) -> tuple[int, int, int]:
+        """(dX, dY, K) Bob sends for segment k (:func:`segment_terms`, or a link's)."""
+        if k in self.links:
+            return DEAD_LINE
+        return segment_terms(self.points[k], self.points[k + 1])
+
+    def hits(self, alice: Sequence[Point]) -> list[bool]:
+        """The plaintext answer this path gives Alice (the reference for tests)."""
+        live = [k for k in range(self.segments) if k not in self.links]
+        return [
+            self.everywhere
+            or any(
+                segments_intersect(alice[i], alice[i + 1], self.points[k], self.points[k + 1])
+                for k in live
+            )
+            for i in range(len(alice) - 1)
+        ]
+
+
+def fit_to_box(path: Sequence[Point], r: int, n: int) -> BobPath:
+    """Bob's path as far as it lies in the public box [-r, r]^2, in exactly n segments.
+
+    ``n`` is the public size, chosen from Bob's own path alone (never from where it lies), so
+    Alice cannot tell from the run whether his path leaves her box.  Each segment is cut to the
+    box exactly (Liang-Barsky), the cut points rounded to the grid -- at most half a cell, as
+    every waypoint is; pieces that do not share an end are joined by links (see
+    :class:`BobPath`), so the answer inside the box is that of the uncut path.  Whatever
+    does not fit into n segments makes the answer *meets everywhere*; a path with nothing in
+    the box is a link at a corner, which meets nothing.
+    """
+    if n < 1:
+        raise ValueError("a path has at least one segment")
+    points: list[Point] = []
+    links: set[int] = set()
     for p, q in itertools.pairwise(path):
         part = _clip(p, q, r)
         if part is None:
             continue
         a, b = _round_in(part[0], r), _round_in(part[1], r)
-        if out and out[-1] != a:
-            out += _walk(out[-1], a, r)
-        if not out or out[-1] != a:
-            out.append(a)
-        out.append(b)
-    return tuple(out) if out else ((r, r), (r, r))
+        if points and points[-1] != a:
+            links.add(len(points) - 1)
+            points.append(a)
+        elif not points:
+            points.append(a)
+        points.append(b)
+    if not points:
+        return BobPath(((r, r),) * (n + 1), frozenset(range(n)))
+    if len(points) - 1 > n:
+        return BobPath(((r, r),) * (n + 1), frozenset(range(n)), everywhere=True)
+    # zero-length segments at the last vertex change no answer
+    return BobPath(tuple(points) + (points[-1],) * (n + 1 - len(points)), frozenset(links))

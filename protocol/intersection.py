@@ -32,12 +32,12 @@ from dataclasses import dataclass, field
 from .circuit import Circuit
 from .dgk import DGKPrivateKey
 from .errors import InputRangeError, LocalProtocolError, ProtocolError, RemoteProtocolError
-from .geometry import Point, clip_to_box
+from .geometry import BobPath, Point, fit_to_box
 from .grid import GridKind, GridSpec
 from .ot.setup import DEFAULT_BLOCK_BITS, DEFAULT_SECURITY, ChooserSetup, HolderSetup
 from .paillier import PaillierPrivateKey
 from .pathcircuit import Orient, Proj, path_hits
-from .wire import Hello, Suite
+from .wire import Hello, Suite, put_blob
 
 MAX_SEGMENTS = 256
 MAX_MODULUS_BITS = 4096  # bounds the work a peer's key can impose
@@ -105,12 +105,13 @@ class Layout:
 
     def outputs(self, circuit: Circuit, orient: Sequence[Orient], proj: Sequence[Proj]) -> None:
         """Add the path circuit on the per-value wires (``orient`` for O1/O3 positions,
-        ``proj`` for T positions, indexed by position; other entries are ignored)."""
+        ``proj`` for T positions, indexed by position; other entries are ignored), and Bob's
+        flag as the circuit's last input (Alice's share 0; see ``pathcircuit.path_hits``)."""
         m, n = self.m, self.n
         o1 = [[orient[self.position(Kind.O1, i, k)] for k in range(n + 1)] for i in range(m)]
         tt = [[proj[self.position(Kind.T, i, k)] for k in range(n + 1)] for i in range(m)]
         o3 = [[orient[self.position(Kind.O3, j, k)] for k in range(n)] for j in range(m + 1)]
-        for wire in path_hits(circuit, m, n, o1, tt, o3):
+        for wire in path_hits(circuit, m, n, o1, tt, o3, circuit.input()):
             circuit.output(wire)
 
 
@@ -159,6 +160,7 @@ class AliceSide(Machine):
     m: int  # padded size
     segments: int  # real size
     n: int | None = None  # Bob's padded size, once his first reply has told it
+    peer_keys: bytes = b""  # Bob's public keys from his first reply (paper suite)
     _hits: list[bool]
 
     def start(self) -> bytes:
@@ -191,27 +193,29 @@ class BobKeys:
     def generate(cls) -> BobKeys:
         return cls(PaillierPrivateKey.generate(), DGKPrivateKey.generate(comparison_bits=DGK_BITS))
 
+    def public_bytes(self) -> bytes:
+        """The public keys as the KEYS message carries them (what a beacon's keys hash
+        covers): the Paillier and the DGK public key, each a 2-byte length and its bytes."""
+        return put_blob(self.paillier.public_key.to_bytes()) + put_blob(
+            self.dgk.public_key.to_bytes()
+        )
+
 
 PathSource = Sequence[Point] | Callable[[Hello], Sequence[Point]]
 
 
-def bob_path(
-    source: PathSource, hello: Hello, *, geographic: bool, limits: Limits
-) -> tuple[tuple[Point, ...], int]:
-    """Bob's path on Alice's grid, cut to its box, and its padded size n."""
+def bob_path(source: PathSource, hello: Hello, *, geographic: bool, limits: Limits) -> BobPath:
+    """Bob's path on Alice's grid, cut to its box (:func:`protocol.geometry.fit_to_box`), in
+    the public size n: the padded size of his own path (at most ``max_segments``), whatever
+    Alice's grid -- so neither a refusal nor the size tells her where his path lies."""
     raw = tuple(source(hello) if callable(source) else source)
     if len(raw) < 2:
         raise InputRangeError("a path needs at least two points")
     if geographic != (hello.grid.kind is GridKind.GEO):
         raise RemoteProtocolError("peer's grid kind does not match this path's coordinates")
     on_grid = hello.grid.project_path(raw, checked=False) if geographic else raw
-    n = limits.padded(len(raw) - 1)
-    path = clip_to_box(on_grid, hello.grid.range)
-    if len(path) - 1 > n:  # the walk along the box edge added segments
-        n = limits.padded(min(len(path) - 1, limits.max_segments))
-        if len(path) - 1 > n:
-            raise InputRangeError("path does not fit the segment limit after cutting to the box")
-    return pad_path(path, n), n
+    n = limits.padded(min(len(raw) - 1, limits.max_segments))
+    return fit_to_box(on_grid, hello.grid.range, n)
 
 
 class Alice:
@@ -290,6 +294,12 @@ class Alice:
         """Bob's padded segment count (public, as ``m``), None until his first reply."""
         return self._impl.n
 
+    @property
+    def peer_keys(self) -> bytes:
+        """Bob's public keys as his first reply carried them (:meth:`BobKeys.public_bytes`;
+        empty for the compact suite, which has none): for checking against his beacon."""
+        return self._impl.peer_keys
+
     def start(self) -> bytes:
         return self._impl.start()
 
@@ -357,9 +367,10 @@ class Bob:
         if not 1 <= hello.m <= self.limits.max_segments:
             raise RemoteProtocolError(f"peer's path has {hello.m} segments")
         try:
-            path, n = bob_path(self.source, hello, geographic=self.geographic, limits=self.limits)
-        except InputRangeError as exc:
+            path = bob_path(self.source, hello, geographic=self.geographic, limits=self.limits)
+        except InputRangeError as exc:  # Bob's own input (fewer than two points, bad degE7)
             raise LocalProtocolError(f"this path cannot be compared: {exc}") from exc
+        n = path.segments
         if hello.suite is Suite.COMPACT:
             from .suite_compact import CompactBob
 

@@ -68,11 +68,14 @@ def path_hits(
     o1: Sequence[Sequence[Orient]],
     proj: Sequence[Sequence[Proj]],
     o3: Sequence[Sequence[Orient]],
+    flag: int | None = None,
 ) -> list[int]:
     """Output wires: for each of Alice's m segments, does it meet any of Bob's n?
 
     ``o1[i][k]`` orient(A_i, A_i+1, B_k) and ``proj[i][k]`` for Bob's vertex k (n + 1 of them),
-    ``o3[j][k]`` orient(B_k, B_k+1, A_j) for Alice's vertex j (m + 1 of them).
+    ``o3[j][k]`` orient(B_k, B_k+1, A_j) for Alice's vertex j (m + 1 of them).  ``flag`` (Bob's
+    input, free XOR) flips every pair with his segment 0: he sets it only when segment 0 is a
+    link (never a hit), to answer *meets* everywhere (:class:`protocol.geometry.BobPath`).
     """
     hits = []
     for i in range(m):
@@ -82,5 +85,7 @@ def path_hits(
             )
             for k in range(n)
         ]
+        if flag is not None:
+            pairs[0] = c.xor(pairs[0], flag)
         hits.append(c.or_all(pairs))
     return hits

@@ -40,8 +40,8 @@ from dataclasses import dataclass
 
 from .circuit import Circuit
 from .encoding import Reader
-from .errors import InputRangeError, LocalProtocolError, RemoteProtocolError
-from .geometry import Point, orient_coefficients, projection_key
+from .errors import InputRangeError, LocalProtocolError, RemoteProtocolError, UnknownSetupError
+from .geometry import BobPath, Point, orient_coefficients, projection_key
 from .gmw import Gmw, plan_groups, rot_count, rounds
 from .grid import GridSpec
 from .intersection import AliceSide, BobSide, Kind, Layout, Limits, State, pad_path
@@ -197,16 +197,16 @@ def _run_nonce(alice: bytes, bob: bytes, setup_id: bytes) -> bytes:
 
 
 def _circuit_inputs(
-    plan: Plan, leaf_shares: list[list[list[tuple[int, int]]]], highs: list[list[int]]
+    plan: Plan, leaf_shares: list[list[list[tuple[int, int]]]], highs: list[list[int]], flag: int
 ) -> list[int]:
-    """Input shares in the circuit's wire order (see :func:`make_plan`)."""
+    """Input shares in the circuit's wire order (see :func:`make_plan`); Bob's flag last."""
     out: list[int] = []
     for per_value, high in zip(leaf_shares, highs, strict=True):
         for per_threshold in per_value:
             for gt, eq in per_threshold:
                 out += [gt, eq]
         out += high
-    return out
+    return [*out, flag]
 
 
 # --------------------------------------------------------------------------- Alice
@@ -342,7 +342,7 @@ class CompactAlice(AliceSide):
             self.plan.circuit,
             alice=True,
             rots=self._triple_rots,
-            inputs=_circuit_inputs(self.plan, shares, highs),
+            inputs=_circuit_inputs(self.plan, shares, highs, 0),
         )
         return frame(MsgType.TABLES, 5, tables + self.gmw.send())
 
@@ -365,7 +365,7 @@ class CompactBob(BobSide):
     def __init__(
         self,
         hello: Hello,
-        path: tuple[Point, ...],
+        path: BobPath,
         n: int,
         setups: MutableMapping[bytes, ChooserSetup],
     ) -> None:
@@ -377,7 +377,7 @@ class CompactBob(BobSide):
         if offer.setup_id is not None:
             found = setups.get(offer.setup_id)
             if found is None:
-                raise RemoteProtocolError("unknown OT setup (start a fresh one)")
+                raise UnknownSetupError("unknown OT setup (start a fresh one)")
             self.setup = found
         else:
             self.setup, setup_reply = chooser_setup(offer.points, offer.blocks)
@@ -404,10 +404,10 @@ class CompactBob(BobSide):
 
     def _values(self) -> list[int]:
         r = self.grid.range
-        b = self.path
-        values = [c + r for point in b for c in point]
+        values = [c + r for point in self.path.points for c in point]
         for k in range(self.n):
-            values += [b[k + 1][0] - b[k][0] + 2 * r, b[k + 1][1] - b[k][1] + 2 * r]
+            dx, dy, _ = self.path.line(k)
+            values += [dx + 2 * r, dy + 2 * r]
         return values
 
     def _step(self, data: bytes) -> bytes | None:
@@ -428,12 +428,9 @@ class CompactBob(BobSide):
         shares = self.products.shares(body)
         l = self.plan.l
         top = 1 << (l + 1)
-        b = self.path
-        constants = []
-        for kind, _, k in self.plan.layout.values:
-            constants.append(
-                b[k][0] * b[k + 1][1] - b[k + 1][0] * b[k][1] if kind is Kind.O3 else 0
-            )
+        constants = [
+            self.path.line(k)[2] if kind is Kind.O3 else 0 for kind, _, k in self.plan.layout.values
+        ]
         values = [(s + c) % top for s, c in zip(shares, constants, strict=True)]
         self._highs = [v >> l for v in values]
         self.leaves = LeavesBob(
@@ -451,7 +448,7 @@ class CompactBob(BobSide):
             self.plan.circuit,
             alice=False,
             rots=self._triple_rots,
-            inputs=_circuit_inputs(self.plan, shares, highs),
+            inputs=_circuit_inputs(self.plan, shares, highs, int(self.path.everywhere)),
         )
         self.gmw.receive(body[size:])
         return self._send()

@@ -40,7 +40,7 @@ from .comparison import (
 from .dgk import DGKPublicKey
 from .encoding import Reader
 from .errors import LocalProtocolError, RemoteProtocolError
-from .geometry import Point, orient_coefficients, projection_key, segment_terms
+from .geometry import BobPath, Point, orient_coefficients, projection_key
 from .grid import GridSpec
 from .hegates import HeGatesAlice, HeGatesBob
 from .intersection import (
@@ -57,7 +57,7 @@ from .intersection import (
 from .paillier import PaillierCiphertext, PaillierPublicKey
 from .params import check_kappa
 from .pathcircuit import Orient, Proj
-from .wire import NONCE_SIZE, Hello, MsgType, Suite, frame, put_blob, take_blob, unframe
+from .wire import NONCE_SIZE, Hello, MsgType, Suite, frame, take_blob, unframe
 
 MAX_KEY_BYTES = 3 * (MAX_MODULUS_BITS // 8) + 4
 
@@ -203,11 +203,13 @@ class PaperAlice(AliceSide):
     def _on_keys(self, body: bytes) -> bytes:
         reader = Reader(body)
         self.n = self.limits.peer_size(reader.uint(2))
+        start = reader.offset
         paillier_key = take_blob(reader)
         if len(paillier_key) > MAX_MODULUS_BITS // 8:
             raise RemoteProtocolError("peer's Paillier modulus is larger than 4096 bits")
         self.paillier = PaillierPublicKey.from_bytes(paillier_key, insecure_for_tests=self.insecure)
         self.dgk = read_dgk_key(take_blob(reader), self.insecure)
+        self.peer_keys = body[start : reader.offset]  # as BobKeys.public_bytes() wrote them
         if 3 * self.l + 3 >= self.dgk.plaintext_modulus:
             raise RemoteProtocolError("peer's DGK plaintext space is too small")
         self.w = slot_bits(self.l, self.kappa)
@@ -270,6 +272,7 @@ class PaperAlice(AliceSide):
             raise RemoteProtocolError("wrong number of bit ciphertexts")
         tests = self.comparison.compare_bits(BitDecompositions(body))
         inputs = [s for per in self.comparison.shares for s in per]
+        inputs.append(0)  # Alice's share of Bob's flag (Layout.outputs)
         self.gates = HeGatesAlice(self.circuit, self.dgk, inputs)
         return frame(MsgType.TESTS, 5, tests.to_bytes())
 
@@ -283,7 +286,7 @@ class PaperAlice(AliceSide):
 
 class PaperBob(BobSide):
     def __init__(
-        self, hello: Hello, path: tuple[Point, ...], n: int, keys: BobKeys, *, insecure: bool
+        self, hello: Hello, path: BobPath, n: int, keys: BobKeys, *, insecure: bool
     ) -> None:
         try:
             check_kappa(hello.kappa, insecure)
@@ -312,11 +315,10 @@ class PaperBob(BobSide):
             counts,
             insecure_for_tests=insecure,
         )
-        b = path
-        terms = [segment_terms(b[k], b[k + 1]) for k in range(n)]
+        terms = [path.line(k) for k in range(n)]
         vectors = (
-            [p[0] for p in b],
-            [p[1] for p in b],
+            [p[0] for p in path.points],
+            [p[1] for p in path.points],
             [t[0] for t in terms],
             [t[1] for t in terms],
             [t[2] for t in terms],
@@ -327,12 +329,7 @@ class PaperBob(BobSide):
                 chunk = vector[start : start + per]
                 value = sum(v << (self.w * s) for s, v in enumerate(chunk))
                 cts.append(pub.encrypt(value).to_bytes())
-        body = (
-            n.to_bytes(2, "big")
-            + put_blob(pub.to_bytes())
-            + put_blob(self.dgk.public_key.to_bytes())
-            + b"".join(cts)
-        )
+        body = n.to_bytes(2, "big") + keys.public_bytes() + b"".join(cts)
         self._reply = frame(MsgType.KEYS, 2, body)
         self.state = State.RUNNING
         self.step = 3
@@ -357,6 +354,7 @@ class PaperBob(BobSide):
             reader.finish()
             self.comparison.zero_test(tests)
             inputs = [s for per in self.comparison.shares for s in per]
+            inputs.append(int(self.path.everywhere))  # Bob's flag (Layout.outputs)
             self.gates = HeGatesBob(self.circuit, self.dgk, inputs)
             reply = self._next(6)
         else:

@@ -10,10 +10,12 @@ from .airtime import PROFILES, LinkProfile, profile
 from .arq import LinkError, LinkTimeout, MessageTooLarge, PeerAborted
 from .clock import Clock, SimulationStalled, VirtualTimeLoop, run_simulated
 from .endpoint import LinkConfig, LinkEndpoint, LinkStats
+from .frames import AbortCode
 from .medium import Channel, Impairments, SimMedium
 
 __all__ = [
     "PROFILES",
+    "AbortCode",
     "Channel",
     "Clock",
     "Impairments",

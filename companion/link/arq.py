@@ -13,7 +13,7 @@ outstanding, that fragment).  A fragment goes out in at most ``max_tries`` burst
 
 from __future__ import annotations
 
-from .frames import AckInfo, Flag, Frame, FrameType
+from .frames import AbortCode, AckInfo, Flag, Frame, FrameType
 
 
 class LinkError(Exception):
@@ -25,12 +25,11 @@ class LinkTimeout(LinkError):
 
 
 class PeerAborted(LinkError):
-    """The peer ended the session (ABORT frame)."""
+    """The peer ended the session (ABORT frame, unauthenticated: end the run, nothing more)."""
 
-    def __init__(self, code: int, text: str) -> None:
-        super().__init__(f"peer aborted the session (code {code}): {text}")
+    def __init__(self, code: AbortCode) -> None:
+        super().__init__(f"peer aborted the session: {code.name.lower()} (code {code})")
         self.code = code
-        self.text = text
 
 
 class MessageTooLarge(LinkError):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import selectors
+import time
 from collections.abc import Awaitable, Callable, Coroutine
 from typing import Any, TypeVar
 
@@ -25,9 +26,18 @@ class Clock:
         if scale <= 0:
             raise ValueError("time scale must be positive")
         self.scale = scale
+        self._wall_offset: float | None = None
 
     def now(self) -> float:
         return asyncio.get_running_loop().time() * self.scale
+
+    def wall(self) -> float:
+        """Unix seconds in link time: the wall clock (GPS time on a drone) when first asked,
+        advanced by link seconds since -- one time base for every party sharing this clock,
+        also in a replay at a time scale or on a virtual clock (beacon and request times)."""
+        if self._wall_offset is None:
+            self._wall_offset = time.time() - self.now()
+        return self._wall_offset + self.now()
 
     async def sleep(self, seconds: float) -> None:
         await asyncio.sleep(max(seconds, 0.0) / self.scale)

@@ -30,7 +30,9 @@ from .clock import Clock
 from .frames import (
     BROADCAST,
     MAX_ACK_BITMAP,
+    MAX_BEACON_FRAGMENTS,
     OVERHEAD,
+    AbortCode,
     Flag,
     Frame,
     FrameError,
@@ -43,11 +45,6 @@ from .reassembly import Delivered, Receiver
 
 _JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
 
-ABORT_PROTOCOL = 1  # the peer's message failed the protocol's checks
-ABORT_TIMEOUT = 2  # a time limit of the run passed
-ABORT_SHUTDOWN = 3  # the process is stopping
-ABORT_REFUSED = 4  # not now (run budget, busy)
-ABORT_LINK = 5  # the link gave up (retries exhausted)
 MAX_DEFERRALS = 60  # listen before talk gives up waiting after this many back-offs
 
 
@@ -112,6 +109,7 @@ class _Session:
     send_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     next_seq: int = 0
     aborted: PeerAborted | None = None
+    arrived: float = 0.0  # accepted sessions: when the first fragment of the first message came
 
 
 class LinkEndpoint:
@@ -158,6 +156,8 @@ class LinkEndpoint:
         self._tasks: list[asyncio.Task[None]] = []
         self._running = False
         self._last_traffic = -math.inf
+        self._beacon_seq = secrets.randbelow(256)
+        self._beacon_parts: dict[tuple[int, int, int], tuple[float, dict[int, bytes]]] = {}
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -207,16 +207,21 @@ class LinkEndpoint:
         async with self.clock.timeout(timeout):
             return await self._accept.get()
 
+    def arrived(self, peer: int, session: int) -> float:
+        """Link time the first fragment of a session the peer opened reached us (what a
+        request's own time is checked against: its transfer may take long)."""
+        return self._session(peer, session).arrived
+
     def close_session(self, peer: int, session: int) -> None:
         """Forget a session: its buffers are freed, late frames are ignored."""
         self._sessions.pop((peer, session), None)
         self._closed[(peer, session)] = self.clock.now()
         self.receiver.forget_session(peer, session)
 
-    def abort(self, peer: int, session: int, code: int, text: str = "") -> None:
+    def abort(self, peer: int, session: int, code: AbortCode) -> None:
         """Tell the peer the session is over (three copies, and again whenever it asks for an
         ACK in this session) and close it here."""
-        frame = Frame(FrameType.ABORT, self.node, peer, session, payload=abort_payload(code, text))
+        frame = Frame(FrameType.ABORT, self.node, peer, session, payload=abort_payload(code))
         for _ in range(3 if self._running else 0):
             self._enqueue(frame, control=True)
         self.close_session(peer, session)
@@ -320,12 +325,32 @@ class LinkEndpoint:
             return item
 
     async def beacon(self, payload: bytes) -> None:
-        """Broadcast one beacon frame (unacknowledged; it spends the data budget, not the
-        reserve kept for acknowledgements)."""
-        frame = Frame(FrameType.BEACON, self.node, BROADCAST, 0, payload=payload)
-        if len(frame.encode()) > self.frame_size:
-            raise MessageTooLarge(f"beacon of {len(payload)} bytes exceeds one frame")
-        await self._enqueue(frame, control=False)
+        """Broadcast one beacon (unacknowledged; it spends the data budget, not the reserve
+        kept for acknowledgements): one frame, or a few fragments where the profile's frames
+        are small (US915 SF9), which a receiver puts together or drops whole."""
+        count = max(1, -(-len(payload) // self.payload_size))
+        if count > MAX_BEACON_FRAGMENTS:
+            raise MessageTooLarge(f"beacon of {len(payload)} bytes needs {count} frames")
+        seq, self._beacon_seq = self._beacon_seq, (self._beacon_seq + 1) & 0xFF
+        size = self.payload_size
+        done = [
+            self._enqueue(
+                Frame(
+                    FrameType.BEACON,
+                    self.node,
+                    BROADCAST,
+                    0,
+                    seq,
+                    i,
+                    count,
+                    payload[i * size : (i + 1) * size],
+                ),
+                control=False,
+            )
+            for i in range(count)
+        ]
+        for sent in done:
+            await sent
 
     def _raise_if_aborted(self, sess: _Session) -> None:
         if sess.aborted is not None:
@@ -445,16 +470,36 @@ class LinkEndpoint:
                 entry[1].set()
         elif frame.type is FrameType.ABORT:
             if sess is not None and sess.aborted is None:
-                sess.aborted = PeerAborted(frame.payload[0], frame.payload[1:].decode())
+                sess.aborted = PeerAborted(AbortCode(frame.payload[0]))
                 sess.inbox.put_nowait(sess.aborted)
                 for (peer, session, _), (_, event) in self._outgoing.items():
                     if (peer, session) == key:
                         event.set()
             self.receiver.forget_session(*key)
         elif frame.type is FrameType.BEACON:
-            if self.beacons.full():
-                self.beacons.get_nowait()
-            self.beacons.put_nowait((frame.src, frame.payload))
+            payload = self._beacon_fragment(frame, now)
+            if payload is not None:
+                if self.beacons.full():
+                    self.beacons.get_nowait()
+                self.beacons.put_nowait((frame.src, payload))
+
+    def _beacon_fragment(self, frame: Frame, now: float) -> bytes | None:
+        """A whole beacon once all its fragments are in (a few seconds at most; partial
+        beacons are bounded in number and age, and dropped whole)."""
+        if frame.count == 1:
+            return frame.payload
+        for key in [k for k, (t, _) in self._beacon_parts.items() if now - t > 30.0]:
+            del self._beacon_parts[key]
+        key = (frame.src, frame.seq, frame.count)
+        _, parts = self._beacon_parts.setdefault(key, (now, {}))
+        parts[frame.index] = frame.payload
+        if len(parts) == frame.count and all(i in parts for i in range(frame.count)):
+            del self._beacon_parts[key]
+            return b"".join(parts[i] for i in range(frame.count))
+        while len(self._beacon_parts) > 16:
+            self.stats.drop("beacon_partial")
+            del self._beacon_parts[next(iter(self._beacon_parts))]
+        return None
 
     def _deliver(self, message: Delivered, now: float) -> None:
         key = (message.src, message.session)
@@ -466,6 +511,8 @@ class LinkEndpoint:
             if len(self._sessions) >= self.config.max_sessions:
                 self.stats.drop("too_many_sessions")
                 return
-            sess = self._sessions[key] = _Session(message.src, message.session, now)
+            sess = self._sessions[key] = _Session(
+                message.src, message.session, now, arrived=message.started
+            )
             self._accept.put_nowait(key)
         sess.inbox.put_nowait(message.data)

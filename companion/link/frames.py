@@ -28,15 +28,27 @@ CRC = struct.Struct(">I")
 OVERHEAD = HEADER.size + CRC.size  # 16 bytes per frame
 BROADCAST = 0xFFFF
 MAX_ACK_BITMAP = 32  # bytes: an ACK can report 256 fragments beyond the cumulative point
-MAX_ABORT_TEXT = 64
+MAX_BEACON_FRAGMENTS = 8  # a beacon is one frame, or a few on a dwell-limited profile
 
 
 class FrameType(enum.IntEnum):
     DATA = 1  # one fragment of a message
     ACK = 2  # selective acknowledgement: cumulative count + bitmap
     POLL = 3  # "send me your ACK for this message" (after a timeout)
-    ABORT = 4  # the session is over on the sender's side; payload: reason code + text
-    BEACON = 5  # periodic announcement, payload opaque to the link
+    ABORT = 4  # the session is over on the sender's side; payload: one reason code
+    BEACON = 5  # periodic announcement (fragment index/count), payload opaque to the link
+
+
+class AbortCode(enum.IntEnum):
+    """Why a session ended: one byte, no text (an abort must never carry anything secret, and
+    nobody acts on an unauthenticated one beyond ending the run)."""
+
+    PROTOCOL = 1  # the peer's message failed the protocol's checks
+    TIMEOUT = 2  # a time limit of the run passed
+    SHUTDOWN = 3  # the process is stopping
+    REFUSED = 4  # not now
+    LINK = 5  # the link gave up (retries exhausted)
+    AUTH = 6  # a message failed authentication
 
 
 class Flag(enum.IntFlag):
@@ -116,13 +128,12 @@ def decode_frame(data: bytes, max_size: int = PHY_MAX_FRAME) -> Frame:
             raise FrameError("fields", "ACK beyond count")
     if kind is FrameType.POLL and (payload or index):
         raise FrameError("fields", "POLL carries no payload")
-    if kind is FrameType.ABORT:
-        if not 1 <= len(payload) <= 1 + MAX_ABORT_TEXT:
-            raise FrameError("fields", "ABORT payload size")
-        try:
-            payload[1:].decode("utf-8")
-        except UnicodeDecodeError:
-            raise FrameError("fields", "ABORT text not UTF-8") from None
+    if kind is FrameType.ABORT and (
+        len(payload) != 1 or payload[0] not in AbortCode._value2member_map_
+    ):
+        raise FrameError("fields", "ABORT payload")
+    if kind is FrameType.BEACON and (not payload or count > MAX_BEACON_FRAGMENTS):
+        raise FrameError("fields", "BEACON fragment")
     if dst == BROADCAST and kind is not FrameType.BEACON:
         raise FrameError("fields", f"broadcast {kind.name}")
     return Frame(kind, src, dst, session, seq, index, count, bytes(payload), Flag(flags))
@@ -169,12 +180,5 @@ class AckInfo:
         return got
 
 
-def abort_payload(code: int, text: str) -> bytes:
-    raw = text.encode("utf-8")[:MAX_ABORT_TEXT]
-    while raw:  # never cut a UTF-8 sequence in half
-        try:
-            raw.decode("utf-8")
-            break
-        except UnicodeDecodeError:
-            raw = raw[:-1]
-    return bytes([code]) + raw
+def abort_payload(code: AbortCode) -> bytes:
+    return bytes([code])

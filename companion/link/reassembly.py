@@ -41,6 +41,7 @@ class Delivered:
     session: int
     seq: int
     data: bytes
+    started: float = 0.0  # when its first fragment (of this copy) arrived
 
 
 @dataclass
@@ -50,6 +51,7 @@ class _Partial:
     epoch: int
     fragments: dict[int, bytes] = field(default_factory=dict)
     size: int = 0
+    started: float = 0.0
 
 
 @dataclass
@@ -132,7 +134,9 @@ class Receiver:
             if len(self._partial) >= self.max_partial:
                 self.stats.refuse("too_many_partial")
                 return None, None
-            partial = self._partial[key] = _Partial(frame.count, now, self._next_epoch())
+            partial = self._partial[key] = _Partial(
+                frame.count, now, self._next_epoch(), started=now
+            )
         if frame.count != partial.count:
             self.stats.refuse("inconsistent")
             return None, None
@@ -154,7 +158,7 @@ class Receiver:
             for older in [k for k in self._partial if k[:2] == key[:2]]:
                 del self._partial[older]  # abandoned by its sender (it moved on): stale
             self.stats.delivered += 1
-            delivered = Delivered(frame.src, frame.session, frame.seq, data)
+            delivered = Delivered(frame.src, frame.session, frame.seq, data, partial.started)
             return delivered, self._ack(frame, AckInfo(partial.count), Flag.COMPLETE)
         if frame.flags & Flag.ACK_REQ:
             return None, self._ack(frame, self._info(partial))

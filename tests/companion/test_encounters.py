@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import asyncio
 import math
+import tempfile
 from pathlib import Path
 
 import pytest
 
-from companion.beacon import Beacon, BeaconError
+from companion.beacon import Beacon
 from companion.failsafe import FailsafeSettings, at_risk, run_seconds, too_late
 from companion.flightpath import flight_path
 from companion.levels import assign, levels_mask, plan_levels
@@ -32,12 +33,14 @@ from companion.peers import (
 )
 from companion.planner import plan_offsets
 from companion.radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
+from companion.replay_fleet import make_fleet
 from companion.runtime import Companion, CompanionSettings, box_radius_m
 from protocol.compare import Case, Party
 from protocol.grid import GridKind, GridSpec
 from protocol.suite_compact import message_sizes
 from protocol.wire import Suite
 
+from .attacks.harness import FakeAutopilot
 from .missions import survey
 
 LAT, LON = 473_977_420, 85_455_940
@@ -52,19 +55,24 @@ def north(metres: float) -> tuple[int, int]:
 
 def beacon(position: tuple[int, int], levels: int = 0) -> Beacon:
     return Beacon(
-        position[0], position[1], 518, False, frozenset({Suite.COMPACT}), 7, b"i" * 8, levels
+        position[0], position[1], 518, False, frozenset({Suite.COMPACT}), 7, 1_800_000_000, 1,
+        levels,
+    )  # fmt: skip
+
+
+def alone(items: list[MissionItem], clock: Clock) -> tuple[Companion, FakeAutopilot]:
+    """Drone 1's companion on a radio of its own, beside a fake autopilot holding ``items``."""
+    state = Path(tempfile.mkdtemp(prefix="encounter-state-"))
+    endpoint = LinkEndpoint(1, SimMedium(clock=clock).attach(1), PROFILES["us915-sf7"])
+    autopilot = FakeAutopilot(items)
+    c = Companion(
+        CompanionSettings(node=1, autopilot_url=""),
+        endpoint,
+        autopilot,  # type: ignore[arg-type]
+        make_fleet([(1, "fleet")], state)[1],
     )
-
-
-def test_beacon_round_trip_and_levels() -> None:
-    b = beacon(north(100), levels=0b0110)
-    assert len(b.encode()) == 24
-    assert Beacon.decode(b.encode()).encode() == b.encode()
-    assert Beacon.decode(b.encode()).levels == 0b0110
-    bad = bytearray(b.encode())
-    bad[-9] |= 1  # level 0 is not a climb
-    with pytest.raises(BeaconError):
-        Beacon.decode(bytes(bad))
+    c.original = c.mission = list(items)
+    return c, autopilot
 
 
 def test_cut_counts_from_the_drone() -> None:
@@ -238,21 +246,6 @@ def test_profiles() -> None:
     assert distance_m(north(0), north(1000)) == pytest.approx(1000.0, rel=0.001)
 
 
-class _Autopilot:
-    """Just enough of :class:`companion.autopilot.Autopilot` for an edit."""
-
-    def __init__(self, mission: list[MissionItem]) -> None:
-        self.mission = mission
-        self.uploads: list[list[MissionItem]] = []
-
-    async def download(self) -> list[MissionItem]:
-        return self.mission
-
-    async def replace_mission(self, new: list[MissionItem], held: list[MissionItem]) -> None:
-        self.uploads.append(new)
-        self.mission = new
-
-
 @pytest.mark.parametrize("busy_s", [0.0, 100.0])
 def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None:
     """Drone 1 flies east towards the crossing at 0 m (425 m ahead); peer 2, 800 m south of
@@ -262,12 +255,9 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
     without waiting for a run, and says so (``waiting``)."""
     items, _ = read_plan(SCENARIOS / "inflight_east.plan")  # -600, -250, 250, 600 m east
 
-    async def main() -> tuple[Companion, _Autopilot]:
+    async def main() -> tuple[Companion, FakeAutopilot]:
         clock = Clock()
-        endpoint = LinkEndpoint(1, SimMedium(clock=clock).attach(1), PROFILES["us915-sf7"])
-        autopilot = _Autopilot(items)
-        c = Companion(CompanionSettings(node=1, autopilot_url=""), endpoint, autopilot)  # type: ignore[arg-type]
-        c.original = c.mission = list(items)
+        c, autopilot = alone(items, clock)
         c.path = flight_path(items, None)
         c.relative_alt, c.current_item, c.speed_m_s = 30.0, 2, 10.0  # airborne, segment 0
         (lat, west), (_, east_) = c.path.points[:2]  # -600 and -250 m: half-way, flying east
@@ -301,11 +291,8 @@ def test_edit_is_built_on_the_held_mission_and_keeps_the_current_item() -> None:
     items = [it.replace(frame=3) for it in survey(6)]
     held = [PX4.stored(it) for it in items]
 
-    async def main(vehicle: list[MissionItem]) -> tuple[Companion, _Autopilot]:
-        clock = Clock()
-        endpoint = LinkEndpoint(1, SimMedium(clock=clock).attach(1), PROFILES["us915-sf7"])
-        autopilot = _Autopilot(vehicle)
-        c = Companion(CompanionSettings(node=1, autopilot_url=""), endpoint, autopilot)  # type: ignore[arg-type]
+    async def main(vehicle: list[MissionItem]) -> tuple[Companion, FakeAutopilot]:
+        c, autopilot = alone(vehicle, Clock())
         c.original = c.mission = list(items)
         c.path = flight_path(items, None)
         c.relative_alt, c.current_item = 30.0, 2

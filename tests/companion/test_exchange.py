@@ -136,7 +136,7 @@ def test_run_time_limit(compact: Party) -> None:
 
             async def bob_side() -> None:
                 peer, session = await p.b.accept()
-                with pytest.raises(PeerAborted, match="time limit"):
+                with pytest.raises(PeerAborted, match="timeout"):
                     await serve_bob(p.b, peer, session, bob)
 
             task = asyncio.create_task(bob_side())

@@ -17,6 +17,59 @@ from companion.missionfile import write_wpl
 from .missions import HOME, survey
 
 
+def _companion(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "companion", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+
+
+def identity(folder: Path, node: int) -> str:
+    """Keys made with ``python -m companion keys`` as an operator would: an operator key, a
+    drone key, the certificate; returns the config's [identity] and [[trust.operator]]."""
+    for name in ("acme", f"drone{node}"):
+        made = _companion("keys", "init", str(folder / f"{name}.key"))
+        assert made.returncode == 0 and "fingerprint" in made.stdout, made.stderr
+    cert = folder / f"drone{node}.cert"
+    certify = _companion(
+        "keys", "certify", "--operator-key", str(folder / "acme.key"),
+        "--drone", str(folder / f"drone{node}.pub"), "--node", str(node), "--out", str(cert),
+    )  # fmt: skip
+    assert certify.returncode == 0, certify.stderr
+    return (
+        f'[identity]\nkey = "drone{node}.key"\ncertificate = "drone{node}.cert"\n'
+        f'state_dir = "state"\n[[trust.operator]]\nname = "acme"\nkey = "acme.pub"\n'
+    )
+
+
+def test_keys_cli_and_identity_config(tmp_path: Path) -> None:
+    config = tmp_path / "c.toml"
+    section = identity(tmp_path, 4)
+    config.write_text("node = 4\n" + section)
+    loaded = load_config(config)
+    assert loaded.credentials is not None
+    cert = loaded.credentials.identity.cert
+    assert cert.node == 4 and cert.fingerprint == loaded.credentials.identity.key.fingerprint
+    (operator,) = loaded.credentials.trust.operators.values()
+    assert operator.name == "acme" and cert.signed_by(operator.key)
+    shown = _companion(
+        "keys", "show", str(tmp_path / "drone4.cert"), "--operator", str(tmp_path / "acme.pub")
+    )
+    assert shown.returncode == 0 and "node 4" in shown.stdout and "good" in shown.stdout
+    assert (tmp_path / "drone4.key").stat().st_mode & 0o777 == 0o600
+    again = _companion("keys", "init", str(tmp_path / "drone4.key"))
+    assert again.returncode == 2 and "exists" in again.stderr  # never overwritten silently
+    with pytest.raises(ConfigError, match="node 4, not node 5"):
+        load_config(config, {"node": 5})
+    assert _companion("keys", "init", str(tmp_path / "other.key")).returncode == 0
+    config.write_text("node = 4\n" + section.replace("drone4.key", "other.key"))
+    with pytest.raises(ConfigError, match="another key"):
+        load_config(config)
+
+
 def test_config_file_and_flags(tmp_path: Path) -> None:
     path = tmp_path / "c.toml"
     path.write_text(
@@ -89,7 +142,7 @@ def test_companion_process_starts_and_stops_cleanly(tmp_path: Path) -> None:
         config = tmp_path / "c.toml"
         config.write_text(
             f'node = 7\nautopilot = "udpin://127.0.0.1:{14540 + 43}"\n'
-            f'[link]\nhub = "{address.group(1)}"\n'
+            f'[link]\nhub = "{address.group(1)}"\n' + identity(tmp_path, 7)
         )
         companion = _spawn("run", "--config", str(config))
         try:
@@ -110,11 +163,10 @@ def test_no_autopilot_is_a_clear_error(tmp_path: Path) -> None:
     config = tmp_path / "c.toml"
     config.write_text(
         'node = 7\nautopilot = "udpin://127.0.0.1:14599"\n[link]\nhub = "127.0.0.1:9"\n'
+        + identity(tmp_path, 7)
     )
-    run = subprocess.run(
-        [sys.executable, "-m", "companion", "run", "--config", str(config)],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    run = _companion("run", "--config", str(config))
     assert run.returncode == 1 and "no autopilot heard" in run.stderr
+    config.write_text('node = 7\nautopilot = "udpin://127.0.0.1:14599"\n')
+    anonymous = _companion("run", "--config", str(config))
+    assert anonymous.returncode == 2 and "needs an identity" in anonymous.stderr

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -10,7 +12,8 @@ from shapely.geometry import Point as ShapelyPoint
 
 from protocol.geometry import (
     circuit,
-    clip_to_box,
+    circuit_with_line,
+    fit_to_box,
     orient,
     orient_coefficients,
     path_hits,
@@ -82,28 +85,87 @@ def test_path_hits_on_the_paper_routes() -> None:
 # --------------------------------------------------------------------------- the public box
 
 
+def _inside(points: Any, r: int) -> bool:
+    return all(abs(x) <= r and abs(y) <= r for x, y in points)
+
+
 @given(
     path=st.lists(st.tuples(st.integers(-400, 400), st.integers(-400, 400)), min_size=2, max_size=6)
 )
-def test_clip_stays_in_the_box_and_keeps_inside_paths(path: list[tuple[int, int]]) -> None:
-    r = 100
-    clipped = clip_to_box(path, r)
-    assert len(clipped) >= 2 and all(abs(x) <= r and abs(y) <= r for x, y in clipped)
-    if all(abs(x) <= r and abs(y) <= r for x, y in path):
-        assert clipped == tuple(path)
+def test_fit_stays_in_the_box_in_the_public_size_and_keeps_inside_paths(
+    path: list[tuple[int, int]],
+) -> None:
+    r, n = 100, 8
+    fitted = fit_to_box(path, r, n)
+    assert fitted.segments == n and _inside(fitted.points, r)
+    assert all(0 <= k < n for k in fitted.links)
+    if _inside(path, r):
+        assert fitted.points[: len(path)] == tuple(path) and not fitted.links
+        assert not fitted.everywhere
 
 
 @given(
     alice=st.lists(st.tuples(st.integers(-90, 90), st.integers(-90, 90)), min_size=2, max_size=4),
     bob=st.lists(st.integers(-400, 400), min_size=3, max_size=7),
 )
-def test_clip_is_exact_where_the_cut_falls_on_the_grid(
+def test_fit_is_exact_where_the_cut_falls_on_the_grid(
     alice: list[tuple[int, int]], bob: list[int]
 ) -> None:
     """An axis-parallel path (cut points are grid points) meets Alice's path inside the box
-    exactly as before cutting: the walk along the edge never reaches her."""
+    exactly as before cutting: links between pieces never meet anything."""
     path = [(bob[0], bob[1])]
     for k, value in enumerate(bob[2:]):
         x, y = path[-1]
         path.append((value, y) if k % 2 == 0 else (x, value))
-    assert path_hits(alice, clip_to_box(path, 100)) == path_hits(alice, path)
+    n = len(path) - 1
+    fitted = fit_to_box(path, 100, 2 * n)  # room for every link: never the fallback
+    assert not fitted.everywhere
+    assert fitted.hits(alice) == path_hits(alice, path)
+
+
+@given(
+    alice=st.lists(st.tuples(st.integers(-90, 90), st.integers(-90, 90)), min_size=2, max_size=4),
+    path=st.lists(
+        st.tuples(st.integers(-400, 400), st.integers(-400, 400)), min_size=2, max_size=6
+    ),
+    n=st.integers(1, 8),
+)
+def test_fit_never_misses_a_crossing(
+    alice: list[tuple[int, int]], path: list[tuple[int, int]], n: int
+) -> None:
+    """Whatever the size: every crossing inside the box is answered (the cut points move at
+    most half a cell, so allow a path that crosses within a cell of Alice's); a path that does
+    not fit answers 'meets' everywhere."""
+    fitted = fit_to_box(path, 100, n)
+    got = fitted.hits(alice)
+    if fitted.everywhere:
+        assert all(got)
+        return
+    for i, hit in enumerate(path_hits(alice, path)):
+        if hit and not got[i]:
+            near = [
+                (x + dx, y + dy)
+                for x, y in alice[i : i + 2]
+                for dx in (-1, 0, 1)
+                for dy in (-1, 0, 1)
+            ]
+            assert any(path_hits([p, q], path)[0] for p in near for q in near if p != q)
+
+
+def test_links_and_the_fallback_in_the_circuit() -> None:
+    """The plain circuit on a link's line terms never meets; pieces joined by a link answer
+    exactly; a path that does not fit answers everywhere."""
+    from protocol.geometry import DEAD_LINE
+
+    a, b = (-5, 0), (5, 0)
+    for c, d in (((0, -5), (0, 5)), ((-5, 0), (5, 0)), ((0, 0), (0, 0)), ((7, 0), (9, 0))):
+        assert circuit_with_line(a, b, c, d, DEAD_LINE, 1000) == 0
+    # a V leaving the box at its tip: two pieces and a link, n = 3
+    v = [(-50, -50), (0, 500), (50, -50)]
+    alice = [(-60, 0), (60, 0), (60, 1)]
+    fitted = fit_to_box(v, 100, 3)
+    assert fitted.links == frozenset({1}) and not fitted.everywhere
+    assert fitted.hits(alice) == path_hits(alice, v) == [True, False]
+    squeezed = fit_to_box(v, 100, 2)  # the public size of a two-segment path
+    assert squeezed.everywhere and squeezed.hits(alice) == [True, True]
+    assert fit_to_box([(500, 500), (600, 500)], 100, 2).hits(alice) == [False, False]

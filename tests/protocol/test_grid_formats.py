@@ -1,4 +1,4 @@
-"""Grid projection, ranges, path file formats and the per-peer run budget."""
+"""Grid projection, ranges and path file formats."""
 
 from __future__ import annotations
 
@@ -8,8 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from protocol.budget import BudgetExceededError, RunBudget
-from protocol.errors import InputRangeError, LocalProtocolError, RemoteProtocolError
+from protocol.errors import InputRangeError, RemoteProtocolError
 from protocol.formats import InputFormatError, parse_paper_text
 from protocol.grid import GridKind, GridSpec, comparison_bits
 
@@ -86,16 +85,3 @@ def test_mission_files_are_left_to_the_companion(tmp_path: Path) -> None:
     paper.write_text("(0,0)(1,1)\n")
     with pytest.raises(InputFormatError, match="both files must be missions"):
         load_cases(a, paper)
-
-
-def test_run_budget() -> None:
-    budget = RunBudget(max_runs=2, window_s=60)
-    budget.admit(b"peer", 0.0)
-    budget.admit(b"peer", 10.0)
-    with pytest.raises(BudgetExceededError):
-        budget.admit(b"peer", 30.0)
-    budget.admit(b"other", 30.0)
-    assert budget.remaining(b"peer", 61.0) == 1
-    budget.admit(b"peer", 61.0)
-    with pytest.raises(LocalProtocolError):
-        RunBudget(max_runs=0)

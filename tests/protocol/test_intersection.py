@@ -135,6 +135,29 @@ def test_bob_path_beyond_the_box_is_cut_not_refused(ot_pair: Any) -> None:
     assert hits == [False, False]
 
 
+@pytest.mark.parametrize("suite", [Suite.COMPACT, Suite.PAPER])
+def test_where_bob_lies_changes_neither_the_replies_nor_a_refusal(
+    suite: Suite, ot_pair: Any, keys: Any
+) -> None:
+    """The abort probe: Alice picks a box; inside it, leaving it and coming back, or far
+    outside, Bob's replies have the same sizes (n is his own path's padded size), nothing is
+    refused, and the answer stays safe: exact for the pieces, 'meets' everywhere when the
+    pieces do not fit (the V below needs 3 segments, its public size is 2)."""
+    grid = GridSpec(GridKind.PLANE, 20)
+    alice_path = ((-15, 0), (15, 0), (15, 15))
+    placements = {
+        "inside": (((-5, -5), (0, 5), (5, -5)), [True, False]),
+        "tip outside": (((-5, -5), (0, 500), (5, -5)), [True, True]),
+        "far": (((500, 500), (600, 500), (700, 600)), [False, False]),
+    }
+    sizes = set()
+    for bob_path, expected in placements.values():
+        hits, transcript = run(alice_path, bob_path, suite, keys, ot_pair, grid)
+        assert hits == expected
+        sizes.add(tuple(transcript.sizes))
+    assert len(sizes) == 1
+
+
 def test_message_sizes_depend_only_on_public_values(ot_pair: Any, keys: Any) -> None:
     for suite in (Suite.COMPACT, Suite.PAPER):
         _, crossing = run(((0, 0), (10, 10), (20, 0)), ((0, 10), (10, 0)), suite, keys, ot_pair)

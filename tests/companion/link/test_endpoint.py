@@ -23,8 +23,7 @@ from companion.link import (
     SimulationStalled,
     run_simulated,
 )
-from companion.link.endpoint import ABORT_PROTOCOL
-from companion.link.frames import FrameType, decode_frame
+from companion.link.frames import AbortCode, FrameType, decode_frame
 from companion.link.medium import SimTransport
 
 from .helpers import pair
@@ -139,10 +138,10 @@ def test_abort_reaches_the_peer_and_frees_the_session() -> None:
             await p.a.send(2, session, b"hello")
             peer, sess = await p.b.accept()
             assert await p.b.receive(peer, sess) == b"hello"
-            p.b.abort(peer, sess, ABORT_PROTOCOL, "bad message")
-            with pytest.raises(PeerAborted, match="bad message") as info:
+            p.b.abort(peer, sess, AbortCode.PROTOCOL)
+            with pytest.raises(PeerAborted, match="protocol") as info:
                 await p.a.receive(2, session)
-            assert info.value.code == ABORT_PROTOCOL
+            assert info.value.code is AbortCode.PROTOCOL
             assert p.a.receiver.pending() == 0 and p.b.receiver.pending() == 0
 
     run_simulated(main())
@@ -185,7 +184,9 @@ def test_sending_on_a_closed_endpoint_fails_cleanly() -> None:
             await p.a.close()
             with pytest.raises(LinkError, match="not running"):
                 await p.a.send(2, session, b"late")
-            p.a.abort(2, session, 3)  # an abort after close only forgets the session
+            p.a.abort(
+                2, session, AbortCode.SHUTDOWN
+            )  # an abort after close only forgets the session
             assert not p.a._sessions
 
     run_simulated(main())
@@ -249,9 +250,9 @@ def test_an_aborted_session_answers_late_requests_with_abort() -> None:
             session = p.a.open(2)
             await p.a.send(2, session, b"hello")
             peer, sess = await p.b.accept()
-            p.b.abort(peer, sess, ABORT_PROTOCOL, "bad message")
+            p.b.abort(peer, sess, AbortCode.PROTOCOL)
             p.b._control.clear()  # the three copies never make it to the air
-            with pytest.raises(PeerAborted, match="bad message"):
+            with pytest.raises(PeerAborted, match="protocol"):
                 await p.a.send(2, session, b"more")
 
     run_simulated(main())

@@ -10,6 +10,7 @@ from companion.link.frames import (
     BROADCAST,
     MAX_ACK_BITMAP,
     OVERHEAD,
+    AbortCode,
     AckInfo,
     Flag,
     Frame,
@@ -145,10 +146,14 @@ def test_ack_bitmap_reports_exactly_what_fits(count: int, data: st.DataObject) -
     assert AckInfo.decode(info.encode()) == info
 
 
-def test_abort_text_is_cut_on_a_character_boundary() -> None:
-    payload = abort_payload(1, "é" * 100)
-    assert len(payload) <= 65
-    payload[1:].decode("utf-8")
+def test_aborts_carry_one_code_and_nothing_else() -> None:
+    """No text, nothing secret: an ABORT is one byte from a fixed set."""
+    for code in AbortCode:
+        frame = Frame(FrameType.ABORT, 1, 2, 7, payload=abort_payload(code))
+        assert decode_frame(frame.encode()).payload == bytes([code])
+    for payload in (b"", b"\x01text", b"\x00", b"\x63"):
+        with pytest.raises(FrameError, match="ABORT"):
+            decode_frame(Frame(FrameType.ABORT, 1, 2, 7, payload=payload).encode())
 
 
 @settings(max_examples=500)

@@ -1,0 +1,33 @@
+"""Who is on the radio: drone identities, operator certificates, the trust store, signed
+beacons' keys and authenticated runs.
+
+Pure modules (no sockets, no asyncio): :mod:`.keys` (Ed25519 keys, fingerprints, key files),
+:mod:`.certificate` (an operator vouches for a drone's key and node id), :mod:`.trust` (the
+operators we deconflict with, and their limits), :mod:`.session` (the signed key exchange
+and ChaCha20-Poly1305 on every protocol message).  ``docs/security.md`` says what each one
+stops.
+"""
+
+from .certificate import Certificate, CertificateError
+from .keys import KeyFileError, PublicKey, SigningKey
+from .session import AuthenticationError, Identity, Initiator, Refusal, Responder, Route
+from .trust import Operator, TrustStore, UnknownPeers, Untrusted, UntrustedPeer
+
+__all__ = [
+    "AuthenticationError",
+    "Certificate",
+    "CertificateError",
+    "Identity",
+    "Initiator",
+    "KeyFileError",
+    "Operator",
+    "PublicKey",
+    "Refusal",
+    "Responder",
+    "Route",
+    "SigningKey",
+    "TrustStore",
+    "UnknownPeers",
+    "Untrusted",
+    "UntrustedPeer",
+]

@@ -1,0 +1,74 @@
+"""The probing budget: how many runs peers may ask of us (the paper's probing attack).
+
+Alice learns one bit per segment per run; with many runs she could trace Bob's path.  The
+budget counts the runs we answer (as Bob) over a sliding window, on disk
+(:class:`StateStore`), per *certified* drone, per operator and in all -- never per node id or
+anything else a peer only claims -- and every limit holds across restarts.  The runs we start
+(as Alice) are counted apart, per drone, so that a fault cannot make us call a peer without
+end.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+from .state import StateStore
+
+ALICE, BOB = "alice", "bob"
+
+
+class Scope(enum.Enum):
+    DRONE = "drone"
+    OPERATOR = "operator"
+    TOTAL = "total"
+
+
+class BudgetExceeded(Exception):
+    """No run now: ``scope`` says which limit is used up."""
+
+    def __init__(self, scope: Scope, limit: int, window_s: float) -> None:
+        super().__init__(f"{scope.value} limit of {limit} runs per {window_s:.0f} s reached")
+        self.scope = scope
+
+
+@dataclass(frozen=True, slots=True)
+class RunLimits:
+    per_drone: int = 8  # an in-flight encounter takes a near and a full run
+    total: int = 64  # all peers together
+    window_s: float = 3600.0
+
+    def __post_init__(self) -> None:
+        if min(self.per_drone, self.total) < 1 or self.window_s <= 0:
+            raise ValueError("run limits must be positive")
+
+
+class RunLedger:
+    def __init__(self, store: StateStore, limits: RunLimits) -> None:
+        self.store, self.limits = store, limits
+
+    def check(
+        self, drone: bytes, operator: bytes, operator_limit: int, now: float, role: str = BOB
+    ) -> None:
+        """Raise :class:`BudgetExceeded` if one more run in ``role`` with ``drone`` (of
+        ``operator``, whose drones may ask ``operator_limit`` runs per window together) is
+        too many.  As Alice only the per-drone limit applies."""
+        since = now - self.limits.window_s
+        count = self.store.count_runs
+        checks = [(Scope.DRONE, self.limits.per_drone, count(since, role, drone=drone))]
+        if role == BOB:
+            checks += [
+                (Scope.OPERATOR, operator_limit, count(since, role, operator=operator)),
+                (Scope.TOTAL, self.limits.total, count(since, role)),
+            ]
+        for scope, limit, used in checks:
+            if used >= limit:
+                raise BudgetExceeded(scope, limit, self.limits.window_s)
+
+    def admit(
+        self, drone: bytes, operator: bytes, operator_limit: int, now: float, role: str = BOB
+    ) -> None:
+        """Check, then count one run."""
+        self.check(drone, operator, operator_limit, now, role)
+        self.store.record_run(now, drone, operator, role)
+        self.store.forget_runs(now - 2 * self.limits.window_s)

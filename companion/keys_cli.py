@@ -1,0 +1,128 @@
+"""``python -m companion keys init|certify|show``: drone and operator keys, certificates.
+
+::
+
+    python -m companion keys init acme.key                # an operator's key (and acme.pub)
+    python -m companion keys init drone7.key              # a drone's key (and drone7.pub)
+    python -m companion keys certify --operator-key acme.key --drone drone7.pub --node 7 \\
+        --out drone7.cert                                 # the operator vouches for drone 7
+    python -m companion keys show drone7.cert --operator acme.pub
+
+The drone's config names its key and certificate (``[identity]``) and the operators it trusts
+(``[[trust.operator]]``, their ``.pub`` files); see ``companion/config.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import sys
+import time
+from pathlib import Path
+
+from .auth.certificate import SIZE as CERT_SIZE
+from .auth.certificate import Certificate, CertificateError
+from .auth.keys import (
+    KeyFileError,
+    PublicKey,
+    read_private_key,
+    read_public_key,
+    write_atomic,
+    write_private_key,
+    write_public_key,
+)
+from .auth.keys import SigningKey as Key
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    keys = sub.add_parser("keys", help="drone and operator keys, certificates")
+    action = keys.add_subparsers(dest="action", required=True)
+    init = action.add_parser("init", help="a new Ed25519 key: FILE (mode 0600) and its .pub")
+    init.add_argument("file", help="private key file to create, e.g. drone7.key or acme.key")
+    init.add_argument("--force", action="store_true", help="overwrite an existing key")
+    certify = action.add_parser("certify", help="sign a drone's key with an operator key")
+    certify.add_argument("--operator-key", required=True, help="the operator's private key")
+    certify.add_argument("--drone", required=True, help="the drone's .pub (or .key) file")
+    certify.add_argument("--node", type=int, required=True, help="the drone's node id (0..65534)")
+    certify.add_argument("--days", type=float, default=365.0, help="validity (default: 365)")
+    certify.add_argument("--out", required=True, help="certificate file to write")
+    show = action.add_parser("show", help="what key and certificate files hold")
+    show.add_argument("files", nargs="+")
+    show.add_argument("--operator", help="check certificates against this operator .pub file")
+
+
+def _public_of(path: Path) -> PublicKey:
+    try:
+        return read_public_key(path)
+    except KeyFileError:
+        return read_private_key(path).public  # a .key file works too
+
+
+def _when(unix_s: int) -> str:
+    return datetime.datetime.fromtimestamp(unix_s, datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
+
+
+def _describe(path: Path, operator: PublicKey | None) -> str:
+    data = path.read_bytes()
+    if len(data) == CERT_SIZE and not data.startswith(b"-----"):
+        cert = Certificate.decode(data)
+        now = time.time()
+        lines = [
+            f"{path}: certificate for node {cert.node}",
+            f"  drone key fingerprint     {cert.fingerprint.hex()}",
+            f"  operator key fingerprint  {cert.operator.hex()}",
+            f"  valid {_when(cert.not_before)} .. {_when(cert.not_after)}"
+            + ("" if cert.valid_at(now) else "  (NOT VALID NOW)"),
+        ]
+        if operator is not None:
+            ok = cert.signed_by(operator)
+            lines.append(f"  signature by {operator.fingerprint.hex()}: {'good' if ok else 'BAD'}")
+        return "\n".join(lines)
+    if b"PRIVATE KEY" in data:
+        key = read_private_key(path)
+        return f"{path}: private key, fingerprint {key.fingerprint.hex()}"
+    public = read_public_key(path)
+    return f"{path}: public key {public.raw.hex()}\n  fingerprint {public.fingerprint.hex()}"
+
+
+def run(args: argparse.Namespace) -> int:
+    """Expected failures are one line on stderr and exit code 2."""
+    try:
+        if args.action == "init":
+            path = Path(args.file)
+            public = path.with_suffix(".pub")
+            if path.suffix == ".pub":
+                raise ValueError(f"{path}: name the private key file, not .pub")
+            for existing in (path, public):
+                if existing.exists() and not args.force:
+                    raise ValueError(f"{existing} exists (--force to overwrite)")
+            key = Key.generate()
+            write_private_key(path, key)
+            write_public_key(public, key.public)
+            print(f"{path}: new key, fingerprint {key.fingerprint.hex()} (public: {public})")
+            return 0
+        if args.action == "certify":
+            operator = read_private_key(Path(args.operator_key))
+            drone = _public_of(Path(args.drone))
+            if not args.days > 0:
+                raise ValueError("--days must be positive")
+            start = int(time.time()) - 300  # five minutes of clock error between drones
+            cert = Certificate.issue(
+                operator, drone, args.node, start, start + int(args.days * 86400)
+            )
+            write_atomic(Path(args.out), cert.encode())
+            print(
+                f"{args.out}: node {args.node}, drone {cert.fingerprint.hex()} certified by "
+                f"{operator.fingerprint.hex()} until {_when(cert.not_after)}"
+            )
+            return 0
+        operator_key = _public_of(Path(args.operator)) if args.operator else None
+        for name in args.files:
+            print(_describe(Path(name), operator_key))
+        return 0
+    except (KeyFileError, CertificateError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: {exc.filename}: {exc.strerror}", file=sys.stderr)
+        return 2

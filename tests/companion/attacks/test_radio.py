@@ -1,0 +1,360 @@
+"""The attacker on the radio, against the real link, runtime and authentication (virtual
+time): each test is one attack of ``docs/security.md`` and shows it fails."""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from companion.auth.certificate import Certificate
+from companion.auth.session import Initiator, Route
+from companion.auth.trust import UnknownPeers
+from companion.beacon import CertBeacon, decode_beacon
+from companion.link import run_simulated
+from companion.link.frames import BROADCAST, AbortCode, Frame, FrameType
+from protocol.grid import GridSpec
+from protocol.intersection import Alice
+from protocol.suite_compact import message_sizes
+
+from .harness import Tap, World, world
+
+pytestmark = pytest.mark.attack
+
+
+def run(main: Any) -> Any:
+    return run_simulated(main)
+
+
+def test_the_world_works_unattacked(tmp_path: Path) -> None:
+    """The baseline every attack is measured against: drone 1 (on the ground, Alice) learns
+    its delivery crosses drone 2's inspection and climbs; nothing is dropped or refused."""
+
+    async def main() -> World:
+        w = await world(tmp_path)
+        await w.clock.sleep(400)
+        await w.stop()
+        return w
+
+    w = run(main())
+    (result,) = w.events(1, "result")
+    assert result["flagged"] == [0] and w.events(1, "uploaded") and w.autopilots[1].uploads
+    assert w.events(2, "answered") and not w.events(2, "refused")
+    assert not w.drones[1].rejected and not w.drones[2].rejected
+
+
+def _aborts_are_codes(w: World) -> None:
+    """Nothing but a one-byte code in any abort on the air (no text, no position)."""
+    for frame in w.sniffer.of(FrameType.ABORT):
+        assert len(frame.payload) == 1 and frame.payload[0] in set(AbortCode)
+
+
+def test_abort_probe_learns_nothing_from_where_bobs_path_lies(tmp_path: Path) -> None:
+    """A certified drone probes drone 2 (a straight 560 m leg north) with boxes it picks, all
+    of one size: holding all of drone 2's path, cutting it, touching nothing of it, far away.
+    No refusal, no abort, no text: the replies have the same sizes every time (the public
+    size n is drone 2's own) and the answers are right where they can be."""
+    placements = [
+        ((473_987_000, 85_450_000), 600.0),  # the whole leg inside
+        ((473_990_000, 85_450_000), 100.0),  # the leg crosses the box
+        ((473_990_000, 85_470_000), 100.0),  # 1.5 km east: nothing of it inside
+        ((474_911_000, 86_455_940), 100.0),  # far away
+    ]
+
+    async def main() -> tuple[World, list[Any]]:
+        w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
+        rogue = await w.rogue(9)
+        await rogue.announce(w, placements[0][0])
+        runs = []
+        for centre, radius in placements:
+            grid = GridSpec.geo(*centre, radius_m=radius)
+            r = grid.range // 2  # an east-west line through the box's middle
+            runs.append(await rogue.compare(w, 2, ((-r, 0), (r, 0)), grid))
+        await w.clock.sleep(5)
+        await w.stop()
+        return w, runs
+
+    w, runs = run(main())
+    by_size: dict[int, set[tuple[int, ...]]] = {}
+    for (_, radius), (_, sizes) in zip(placements, runs, strict=True):
+        by_size.setdefault(int(radius), set()).add(tuple(sizes))
+    assert all(len(s) == 1 for s in by_size.values()), by_size  # box size alone sets them
+    assert [report.hits for report, _ in runs] == [[True], [True], [False], [False]]
+    assert not w.sniffer.of(FrameType.ABORT) and not w.events(2, "refused")
+    assert len(w.events(2, "answered")) == len(placements)
+
+
+def test_a_forged_final_message_gives_no_result(tmp_path: Path) -> None:
+    """The attacker jams drone 2's last message of the run (its shares of the answer) and
+    sends its own in its place, CRC and all: drone 1's run fails authentication, there is no
+    result, the mission is untouched, and drone 2 is told with a one-byte code."""
+
+    async def main() -> World:
+        w = await world(tmp_path)
+        alice, bob = w.drones[1], w.drones[2]
+        _, path = alice._remaining_path()
+        grid = alice._grid(path)
+        m = len(path) - 1
+        n = len(bob._remaining_path()[1]) - 1
+        sizes = message_sizes(m, n, grid, fresh_setup=True)
+        last = sum(not from_alice for from_alice, _ in sizes) - 1  # Bob's last message, seq
+
+        def forge_last(frame: Frame) -> Frame:
+            if frame.src == 2 and frame.type is FrameType.DATA and frame.seq == last:
+                payload = bytearray(frame.payload)
+                payload[len(payload) // 2] ^= 0xFF
+                return dataclasses.replace(frame, payload=bytes(payload))
+            return frame
+
+        w.taps[1].rewrite = forge_last
+        await w.clock.sleep(400)
+        await w.stop()
+        return w
+
+    w = run(main())
+    assert not w.events(1, "result") and not w.autopilots[1].uploads
+    failures = w.events(1, "run_failed")
+    assert failures and all("auth" in f for f in failures)
+    assert any(f.payload == bytes([AbortCode.AUTH]) for f in w.sniffer.of(FrameType.ABORT, 1))
+    _aborts_are_codes(w)
+
+
+def test_replayed_beacons_are_dropped(tmp_path: Path) -> None:
+    """Every position beacon drone 2 sent, played again later: drone 1 drops each one and its
+    view of drone 2 does not move.  (A certificate played again is no news: it is public.)"""
+
+    async def main() -> tuple[World, int, int]:
+        w = await world(tmp_path)
+        await w.clock.sleep(120)
+        recorded = [
+            f for _, f in w.sniffer.frames
+            if f.type is FrameType.BEACON and f.src == 2
+            and not isinstance(decode_beacon(f.payload), CertBeacon)
+        ]  # fmt: skip
+        await w.drones[2].stop()  # silent now: whatever drone 1 hears of "2" is the attacker
+        peer = w.drones[1].peers[2]
+        heard, before = peer.heard_at, sum(w.drones[1].rejected.values())
+        for frame in recorded:
+            await w.inject(frame.encode())
+        await w.clock.sleep(0.5)
+        drops = sum(w.drones[1].rejected.values()) - before
+        assert peer.heard_at == heard  # nothing replayed moved the peer
+        await w.stop()
+        return w, len(recorded), drops
+
+    w, recorded, drops = run(main())
+    assert recorded >= 3 and drops == recorded
+    assert any("replay" in reason for reason in w.drones[1].rejected)
+
+
+@pytest.mark.parametrize(("profile", "refused_as"), [("us915-sf7", "before it arrived"),
+                                                   ("eu868-sf7", "a replay")])  # fmt: skip
+def test_a_recorded_run_request_is_refused_by_a_fresh_bob(
+    tmp_path: Path, profile: str, refused_as: str
+) -> None:
+    """The attacker records drone 1's run request and plays it to drone 2 after drone 2
+    restarted (its memory gone, its state on disk) and heard drone 1 again.  Refused before
+    any work, with a one-byte abort, drone 2's run budget untouched: as stale where requests
+    must be fresh to the half minute (US915), by the replay cache on disk where a duty cycle
+    lets a request wait up to an hour for its first frame (EU868)."""
+
+    async def main() -> tuple[World, list[dict[str, Any]], int]:
+        w = await world(tmp_path, profile=profile)
+        for _ in range(60):  # drone 1 compares with drone 2
+            await w.clock.sleep(30)
+            if w.events(2, "answered"):
+                break
+        request = [
+            f for _, f in w.sniffer.frames
+            if f.type is FrameType.DATA and f.src == 1 and f.dst == 2 and f.seq == 0
+        ]  # fmt: skip
+        assert request
+        await w.drones[2].stop()  # drone 2 restarts: a new companion on the same state dir
+        fresh = await restart(w, 2)
+        for _ in range(120):  # until the new companion knows drone 1 (its beacons)
+            await w.clock.sleep(10)
+            if 1 in fresh.peers:
+                break
+        used = fresh.store.count_runs(0, "bob")
+        for _ in range(5):  # played again as it was (again, if a frame was lost)
+            for frame in request:
+                await w.inject(frame.encode())
+            await w.clock.sleep(20)
+            if any(e.kind == "answer_failed" for e in fresh.events):
+                break
+        spent = fresh.store.count_runs(0, "bob") - used
+        await w.stop()
+        return w, [e.detail for e in fresh.events if e.kind == "answer_failed"], spent
+
+    w, failed, spent = run(main())
+    assert failed and all(refused_as in f["auth"] for f in failed) and spent == 0
+    assert not any(e.kind == "answered" for e in w.drones[2].events)  # (the new companion)
+    _aborts_are_codes(w)
+
+
+async def restart(w: World, node: int) -> Any:
+    """A new companion for ``node`` on the same credentials and state directory."""
+    from companion.runtime import Companion, CompanionSettings
+
+    old = w.drones[node]
+    w.taps[node] = Tap(w.medium.attach(node), w.sniffer, w.clock)
+    endpoint = old.endpoint.__class__(node, w.taps[node], old.endpoint.profile, clock=w.clock)
+    c = Companion(
+        CompanionSettings(node=node, autopilot_url=""),
+        endpoint,
+        w.autopilots[node],  # type: ignore[arg-type]
+        w.credentials[node],
+    )
+    c.original = c.mission = list(old.original)
+    c.home, c.path, c.position, c.epoch = old.home, old.path, old.position, w.clock.now()
+    await c.endpoint.start()
+    for work in (c._certificates, c._beacons, c._listen, c._serve, c._alice_loop):
+        c._tasks.append(asyncio.create_task(work()))
+    w.drones[node] = c
+    return c
+
+
+def test_a_spliced_session_fails(tmp_path: Path) -> None:
+    """A message of an earlier run between the same two drones, put into a later run (its
+    session id changed to fit): the later run fails authentication on both sides."""
+
+    async def main() -> World:
+        w = await world(tmp_path)
+        await w.clock.sleep(300)
+        first = [
+            f for _, f in w.sniffer.frames
+            if f.type is FrameType.DATA and f.src == 1 and f.dst == 2 and f.seq == 1
+        ]  # fmt: skip
+        assert first and w.events(1, "result")
+
+        def splice(frame: Frame) -> Frame:
+            if frame.src == 1 and frame.type is FrameType.DATA and frame.seq == 1:
+                old = first[min(frame.index, len(first) - 1)]
+                return dataclasses.replace(old, session=frame.session)
+            return frame
+
+        w.taps[2].rewrite = splice
+        peer = w.drones[1].peers[2]
+        peer.compared, peer.plan = None, []  # drone 1 compares again
+        await w.clock.sleep(300)
+        await w.stop()
+        return w
+
+    w = run(main())
+    assert len(w.events(1, "result")) == 1  # the first run only
+    assert any("auth" in f for f in w.events(2, "answer_failed"))
+    _aborts_are_codes(w)
+
+
+def test_spoofed_node_ids_and_fingerprints_are_ignored(tmp_path: Path) -> None:
+    """An attacker without a trusted certificate speaks as drone 1: drone 1's node id on its
+    frames, a certificate for node 1 from an operator of its own, beacons, and run requests
+    naming drone 1's fingerprint; then as fifty made-up node ids.  Drone 2 answers none,
+    spends none of drone 1's budget, and still deconflicts with the real drone 1."""
+
+    async def main() -> tuple[World, dict[str, int]]:
+        w = await world(tmp_path, extra={9: "mallory"}, untrusted=("mallory",))
+        mallory = w.credentials[9].identity
+        real = w.credentials[1].identity
+        fake_cert = Certificate.issue(mallory.key, mallory.key.public, 1, 0, 2**32 - 1)
+        cert_frame = Frame(FrameType.BEACON, 1, BROADCAST, 0, 0, 0, 1,
+                           CertBeacon(fake_cert).encode())  # fmt: skip
+        await w.inject(cert_frame.encode())
+        for k in range(5):  # requests naming drone 1, signed by mallory
+            session = 30_000 + k
+            alice = Alice(((0, 0), (1, 1)), GridSpec.geo(473_990_000, 85_450_000))
+            initiator = Initiator(
+                mallory, w.credentials[2].identity.cert, Route(1, 2, session), w.clock.wall()
+            )
+            msg1 = initiator.first(alice.start())
+            msg1 = msg1[:1] + real.fingerprint + msg1[9:]  # claims drone 1's fingerprint
+            await w.inject_message(1, 2, session, msg1)
+            await w.clock.sleep(3)
+        for node in range(100, 150):  # made-up addresses, each with a certificate of its own
+            cert = Certificate.issue(mallory.key, mallory.key.public, node, 0, 2**32 - 1)
+            frame = Frame(FrameType.BEACON, node, BROADCAST, 0, 0, 0, 1, CertBeacon(cert).encode())
+            await w.inject(frame.encode())
+        await w.clock.sleep(600)  # (the attacker's frames jam the channel meanwhile)
+        bob = w.drones[2]
+        counts = {
+            "drone1": bob.store.count_runs(0, "bob", drone=real.fingerprint),
+            "all": bob.store.count_runs(0, "bob"),
+        }
+        await w.stop()
+        return w, counts
+
+    w, counts = run(main())
+    started = len(w.events(1, "run_started"))  # the real drone 1's own runs (one may have
+    assert counts == {"drone1": started, "all": started}  # failed: the attacker jams too)
+    assert w.events(1, "result") and w.autopilots[1].uploads  # the real drone 1 got through
+    assert set(w.drones[2].peers) == {1}
+    assert not any("answered" == e.kind and e.detail.get("peer") != 1 for e in w.drones[2].events)
+    _aborts_are_codes(w)
+
+
+def test_a_drone_of_an_untrusted_operator_is_ignored(tmp_path: Path) -> None:
+    """Drone 3 flies for an operator neither drone 1 nor drone 2 trusts: they never take it
+    for a peer, answer none of its requests, spend no budget on it, and say so once (policy
+    "alert": also where it is, at most once a minute)."""
+
+    async def main() -> tuple[World, dict[int, int]]:
+        w = await world(
+            tmp_path,
+            missions={1: "delivery_east.plan", 2: "inspection_north.plan", 3: "mast_east.plan"},
+            operators={3: "rogue"},
+            untrusted=("rogue",),
+            unknown=UnknownPeers.ALERT,
+        )
+        await w.clock.sleep(400)
+        rogue = w.credentials[3].identity.fingerprint
+        spent = {n: w.drones[n].store.count_runs(0, "bob", drone=rogue) for n in (1, 2)}
+        await w.stop()
+        return w, spent
+
+    w, spent = run(main())
+    assert spent == {1: 0, 2: 0}
+    for node in (1, 2):
+        assert 3 not in w.drones[node].peers
+        assert len(w.events(node, "untrusted")) == 1
+        intruder = w.events(node, "intruder")
+        assert intruder and all(e["peer"] == 3 and "distance_m" in e for e in intruder)
+    assert not w.events(3, "result")  # the intruder learnt nothing
+    assert w.events(1, "result") and w.autopilots[1].uploads  # 1 and 2 deconflicted
+
+
+def test_an_oversized_request_is_refused_before_any_work(tmp_path: Path, monkeypatch: Any) -> None:
+    """A certified drone whose beacon says its path has at most 2 segments asks for a run of
+    64, then of 256: refused (signed, SIZE) before drone 2 builds anything for it."""
+    import companion.runtime
+
+    built: list[Any] = []
+    real_bob = companion.runtime.Bob
+
+    def counting_bob(*args: Any, **kwargs: Any) -> Any:
+        built.append(args)
+        return real_bob(*args, **kwargs)
+
+    monkeypatch.setattr(companion.runtime, "Bob", counting_bob)
+
+    async def main() -> tuple[World, list[Any]]:
+        w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
+        rogue = await w.rogue(9)
+        await rogue.announce(w, (474_011_000, 85_455_940), size_class=1)
+        outcomes = []
+        for segments in (64, 256):
+            grid = GridSpec.geo(474_011_000, 85_455_940, radius_m=2000)
+            path = tuple((k, k % 2) for k in range(segments + 1))
+            try:
+                await rogue.compare(w, 2, path, grid)
+            except Exception as exc:
+                outcomes.append(exc)
+        await w.stop()
+        return w, outcomes
+
+    w, outcomes = run(main())
+    assert [type(e).__name__ for e in outcomes] == ["PeerRefused", "PeerRefused"]
+    assert all(e.code.name == "SIZE" for e in outcomes)
+    assert not built and [e["reason"] for e in w.events(2, "refused")] == ["SIZE", "SIZE"]
