@@ -149,7 +149,7 @@ def same_track(a: list[MissionItem], b: list[MissionItem]) -> bool:
 
 def box_radius_m(path: list[tuple[int, int]], centre: tuple[int, int], minimum: float) -> float:
     """The comparison box's radius: ``minimum``, doubled until it holds the path with room
-    to spare (so Bob's walk along its edge stays clear of Alice's path)."""
+    to spare (the box's edge then stays clear of Alice's path)."""
     extent = max((distance_m(centre, p) for p in path), default=0.0) * 1.1 + 50.0
     radius = minimum
     while radius < extent:
@@ -199,6 +199,7 @@ class Companion:
         self._cert_wanted = False
         self._ignored: set[bytes] = set()  # untrusted drones logged already
         self._alerted: dict[int, float] = {}
+        self._asking: dict[int, tuple[float, float]] = {}  # node -> (next ask, interval)
         self.rejected: dict[str, int] = {}  # beacons dropped, by reason
         self.beacon_bytes = 0  # beacon payloads we sent (position and certificate)
         self.beacons_sent = {"signed": 0, "tagged": 0, "certificate": 0}
@@ -462,6 +463,8 @@ class Companion:
             )
             return
         if hearing.kind is Heard.UNKNOWN:
+            if not self._may_ask(src):
+                return
             if hearing.reason == NO_CERTIFICATE:  # ask for it (ours goes with the question)
                 self._cert_wanted = True
                 self._cert_now.set()
@@ -481,6 +484,8 @@ class Companion:
             return
         beacon, neighbour = hearing.beacon, hearing.neighbour
         assert beacon is not None and neighbour is not None
+        if neighbour.knows_us:
+            self._asking.pop(src, None)  # nothing to ask it for any more
         if hearing.new_keys:  # a new beacon key: it may lack ours
             self._want_signed()
         now = self.clock.now()
@@ -504,6 +509,18 @@ class Companion:
         if levels_changed and (peer.conflicts or src in self.precaution):
             self._spawn(self._replan(f"peer {src} announced levels {beacon.levels:#04x}"))
         self._wake.set()
+
+    def _may_ask(self, node: int) -> bool:
+        """Whether to ask again for what a node's beacons lack (its certificate, or its tag for
+        us): at once the first time, then less and less often (to 5 minutes) while it stays
+        so -- a drone that does not trust us would otherwise make us ask forever."""
+        now = self.clock.now()
+        due, interval = self._asking.get(node, (now, self._asked_every_s / 2))
+        if now < due:
+            return False
+        interval = min(2 * interval, SIGNED_EVERY_S)
+        self._asking[node] = (now + interval, interval)
+        return True
 
     def _forget(self, node: int) -> None:
         self.peers.pop(node, None)

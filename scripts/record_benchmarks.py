@@ -46,11 +46,13 @@ def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
         "companions sent (beacons, protocol messages, link headers, ACKs and retransmissions), "
         "all drones together.  First result: when the first run gave an Alice her answer "
         "(simulated seconds from the start); closest approach of each conflicting pair without "
-        "and with the companion (t: when, with it).",
+        "and with the companion (t: when, with it).  Authentication: the bytes it added to the "
+        "runs (key exchange, tags) and to the beacons (beyond unauthenticated 24-byte beacons: "
+        "tags, signed and certificate beacons), and their share of the rest of the radio bytes.",
         "",
-        "| scenario | link | conflicts resolved | precautionary | radio bytes | airtime "
-        "| first result | closest without -> with |",
-        "|---|---|---:|---:|---:|---:|---|---|",
+        "| scenario | link | conflicts resolved | precautionary | radio bytes | authentication "
+        "| airtime | first result | closest without -> with |",
+        "|---|---|---:|---:|---:|---:|---:|---|---|",
     ]
     paths = [SCENARIOS / f"{n}.toml" for n in names] or sorted(SCENARIOS.glob("*.toml"))
     for path in paths:
@@ -71,13 +73,15 @@ def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
             f"{p['closest_approach_baseline_m']:.1f} -> {p['closest_approach_m']:.1f} m"
             + (f" (t = {p['closest_approach_t']:.0f} s)" if p.get("closest_approach_t") else "")
             for p in r["pairs"]
-            if p["conflict"]
+            if p["conflict"] and p.get("trusted", True)
         ]
         link = r["link"]
+        total = sum(d["bytes_sent"] for d in r["drones"])
+        auth = sum(d["auth"]["run_bytes"] + d["auth"]["beacon_added_bytes"] for d in r["drones"])
         lines.append(
             f"| {r['scenario']} | {link['profile']}, {link['loss']:.0%} loss "
             f"| {r['conflicts_resolved']}/{r['conflicts']} | {r['precautionary_actions']} "
-            f"| {sum(d['bytes_sent'] for d in r['drones'])} "
+            f"| {total} | {auth} (+{auth / (total - auth):.1%}) "
             f"| {sum(d['airtime_s'] for d in r['drones']):.1f} s "
             f"| {f'{min(results):.0f} s' if results else '-'} "
             f"| {'; '.join(meets) or '-'} |"

@@ -45,7 +45,8 @@ from .reassembly import Delivered, Receiver
 
 _JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
 
-MAX_DEFERRALS = 60  # listen before talk gives up waiting after this many back-offs
+MAX_DEFER_S = 8.0  # listen before talk gives up waiting after this long (or three of the
+# profile's longest frames, if longer: at SF12 one frame is 8 s on the air)
 
 
 def _consume(future: asyncio.Future[float]) -> None:
@@ -388,7 +389,8 @@ class LinkEndpoint:
         return done
 
     async def _tx_loop(self) -> None:
-        deferred = 0
+        deferred_since: float | None = None
+        patience = max(MAX_DEFER_S, 3 * self.profile.airtime(self.frame_size))
         while True:
             queue = self._control if self._control else self._data
             if not queue:
@@ -405,13 +407,14 @@ class LinkEndpoint:
                 self.stats.duty_wait_s += self.clock.now() - now
                 continue  # re-evaluate: a control frame may have arrived
             sense = getattr(self.transport, "channel_busy", None)
-            if sense is not None and sense() and deferred < MAX_DEFERRALS:
+            if deferred_since is None:
+                deferred_since = now
+            if sense is not None and sense() and now - deferred_since < patience:
                 # Listen before talk: another radio is on the air (LoRa channel activity
                 # detection).  Back off a random few frames' worth and look again.
-                deferred += 1
                 await self.clock.sleep(_JITTER.uniform(0.02, 0.25))
                 continue
-            deferred = 0
+            deferred_since = None
             queue.popleft()
             if item.done.cancelled():
                 continue

@@ -9,8 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from companion.over_link import bench_link, format_link
+from companion.link import PROFILES
+from companion.over_link import bench_link, format_link, link_case
 from protocol.bench_paths import DEFAULT_DATA
+from protocol.compare import Party, load_cases
+from protocol.wire import Suite
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
@@ -83,6 +86,28 @@ def test_bench_link_rows() -> None:
         assert row["frames_sent"] > paper[key]["frames_sent"]
     table = format_link(result)
     assert "| us915-sf9 | 30% | paper pair | 30/30 |" in table
+    for row in rows:  # authenticated runs: key exchange (109 + 129 B) and a tag per message
+        assert row["auth_bytes"] >= 109 + 129 + 16
+    sf9 = {c["kind"]: c for c in result["beacons"]["us915-sf9"]}
+    assert sf9["signed"]["frames"] == 3 and sf9["tagged, 1 neighbour"]["frames"] == 1
+    assert "| us915-sf9 | signed | 131 | 3 |" in table
+
+
+def test_authentication_adds_the_key_exchange_and_a_tag_per_message() -> None:
+    """The same run with and without authentication: the difference is 109 bytes on the
+    request, 129 on the answer and 16 on every further message, and nothing else."""
+    case = load_cases(DEFAULT_DATA / "alices_segments.txt", DEFAULT_DATA / "bobs_segments.txt")[0]
+    party = Party.generate(Suite.COMPACT)
+    plain = link_case(case, party, PROFILES["ideal"], authenticated=False)
+    secure = link_case(case, party, PROFILES["ideal"])
+
+    def sent(r: dict[str, int]) -> int:
+        return r["bytes_alice_to_bob"] + r["bytes_bob_to_alice"]
+
+    assert plain["auth_bytes"] == 0 and secure["hits"] == plain["hits"] == secure["plain_hits"]
+    assert secure["messages"] == plain["messages"]
+    assert secure["auth_bytes"] == sent(secure) - sent(plain)
+    assert secure["auth_bytes"] == 109 + 129 + 16 * (secure["messages"] - 2)
 
 
 def test_compare_mission_files_as_they_are_flown(tmp_path: Path) -> None:

@@ -90,6 +90,26 @@ def test_scenario(name: str, climbers: dict[int, int], conflicts: int) -> None:
 
 
 @pytest.mark.slow
+def test_intruder_scenario() -> None:
+    """Drone 3 flies for an operator nobody trusts: the crossing is resolved as without it;
+    drones 1 and 2 never take it for a peer, report it once each and as an intruder (policy
+    "alert"), and the report says the pairs with it were not deconflicted."""
+    report = _replay("intruder")
+    check(report, {1: 1})
+    assert report["conflicts"] == report["conflicts_resolved"] == 1
+    assert report["untrusted_conflicts"] == 0  # it flies 40 m above everybody
+    drones = {d["id"]: d for d in report["drones"]}
+    rogue = drones[3]
+    assert rogue["operator"] == "rogue" and not rogue["runs"]
+    for ident in (1, 2):
+        assert len(drones[ident]["untrusted_heard"]) == 1
+        assert all(e["peer"] != 3 for e in drones[ident]["runs"])
+    untrusted = [p for p in report["pairs"] if not p["trusted"]]
+    assert sorted(p["drones"] for p in untrusted) == [[1, 3], [2, 3]]
+    assert not any(p["acted"] or p["resolved"] for p in untrusted)
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "heights", "conflicts"),
     [

@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from companion.auth.certificate import Certificate
-from companion.auth.session import Initiator, Route
+from companion.auth.session import Initiator, Refusal, Route
 from companion.auth.trust import UnknownPeers
 from companion.beacon import CertBeacon, decode_beacon
 from companion.link import run_simulated
@@ -358,3 +358,67 @@ def test_an_oversized_request_is_refused_before_any_work(tmp_path: Path, monkeyp
     assert [type(e).__name__ for e in outcomes] == ["PeerRefused", "PeerRefused"]
     assert all(e.code.name == "SIZE" for e in outcomes)
     assert not built and [e["reason"] for e in w.events(2, "refused")] == ["SIZE", "SIZE"]
+
+
+def test_a_forged_refusal_or_abort_changes_nothing_but_the_run(tmp_path: Path) -> None:
+    """Drone 2's answer replaced by a refusal "I am Alice" (a made-up signature), then an
+    ABORT of every code put into the next run: the runs fail, drone 1 keeps its role (a
+    forged refusal must not make it yield and stop comparing) and, once the attacker stops,
+    gets its result."""
+
+    async def main() -> World:
+        w = await world(tmp_path)
+        forged: list[int] = []
+
+        def refuse(frame: Frame) -> Frame:
+            if frame.src == 2 and frame.type is FrameType.DATA and frame.seq == 0 and not forged:
+                forged.append(frame.session)  # a signed refusal's shape, a forger's signature
+                return dataclasses.replace(
+                    frame, index=0, count=1, payload=bytes([3, Refusal.ROLE]) + bytes(64)
+                )
+            return frame
+
+        w.taps[1].rewrite = refuse
+        while not forged:
+            await w.clock.sleep(5)
+        w.taps[1].rewrite = None
+        await w.clock.sleep(40)  # the retry comes; abort it with every code in turn
+        for code in AbortCode:
+            sessions = [
+                f.session for _, f in w.sniffer.frames
+                if f.type is FrameType.DATA and f.src == 1 and f.dst == 2
+            ]  # fmt: skip
+            abort = Frame(FrameType.ABORT, 2, 1, sessions[-1], payload=bytes([code]))
+            await w.inject(abort.encode())
+            await w.clock.sleep(35)
+        await w.clock.sleep(600)
+        await w.stop()
+        return w
+
+    w = run(main())
+    assert w.drones[1].peers[2].role == "alice" and not w.events(1, "yielded")
+    failures = w.events(1, "run_failed")
+    assert any("auth" in f for f in failures)  # the forged refusal
+    assert w.events(1, "result") and w.autopilots[1].uploads  # in the end
+
+
+def test_paper_suite_keys_must_match_the_beacons(tmp_path: Path) -> None:
+    """Paper suite: Bob's Paillier and DGK keys travel in his first reply.  With the keys his
+    signed beacons announce, the run gives a result; when his reply carries other keys than
+    his beacons announced (here: the hash they announce made up), drone 1 refuses the run as
+    unauthenticated and reports nothing."""
+    from protocol.wire import Suite
+
+    async def main(forge_keys: bool) -> World:
+        w = await world(tmp_path / str(forge_keys), settings={"suite": Suite.PAPER})
+        if forge_keys:
+            w.drones[2].keys_hash = bytes(16)  # what its beacons will say from now on
+        await w.clock.sleep(3600)
+        await w.stop()
+        return w
+
+    honest = run(main(False))
+    assert honest.events(1, "result") and honest.autopilots[1].uploads
+    forged = run(main(True))
+    assert not forged.events(1, "result") and not forged.autopilots[1].uploads
+    assert any("do not match" in f.get("auth", "") for f in forged.events(1, "run_failed"))
