@@ -319,8 +319,8 @@ def format_link(result: dict[str, Any]) -> str:
         "Beacons (payload bytes, frames, airtime each; share: of the channel's time, or of the "
         "duty-cycle budget under EU868, if every beacon at the profile's interval -- 10 s, "
         "stretched under a duty cycle -- were of that kind; most are tagged, a signed one goes "
-        "out at the start, when a new drone is heard and every 5 minutes, certificates when "
-        "asked for):",
+        "out at the start, when a new drone is heard and every 5 minutes (or 30th beacon), "
+        "certificates when asked for):",
         "",
         "| profile | beacon | bytes | frames | airtime | share |",
         "|---|---|---:|---:|---:|---:|",

@@ -84,7 +84,8 @@ BOB_GUESS = 4  # Bob's size before he tells it: a remaining route of a few legs 
 # stretch the horizon of a long route over everything; the run watch uses his real size)
 QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a full run
 GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet channel
-SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one)
+SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one),
+SIGNED_EVERY = 30  # and at most every 30th beacon (a duty cycle stretches beacons to minutes)
 ASKED_AGAIN = 0.5  # asked for, a certificate or signed beacon at most every half interval
 ALERT_EVERY_S = 60.0  # an untrusted drone is reported at most this often (policy "alert")
 
@@ -376,7 +377,8 @@ class Companion:
         )
         now = self.clock.now()
         tags = self.neighbours.tag_keys(self.clock.wall() - self._silence_s)
-        if self._sign_next or now - self._signed_at >= SIGNED_EVERY_S:
+        every = max(SIGNED_EVERY_S, SIGNED_EVERY * self.beacon_interval)
+        if self._sign_next or now - self._signed_at >= every:
             self._sign_next, self._signed_at = False, now
             signed = beacon.signed(
                 self.settings.node, self.identity.key, self.beacon_keys.public, self.keys_hash, tags
@@ -518,7 +520,7 @@ class Companion:
         due, interval = self._asking.get(node, (now, self._asked_every_s / 2))
         if now < due:
             return False
-        interval = min(2 * interval, SIGNED_EVERY_S)
+        interval = min(2 * interval, max(SIGNED_EVERY_S, SIGNED_EVERY * self.beacon_interval))
         self._asking[node] = (now + interval, interval)
         return True
 
