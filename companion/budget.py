@@ -3,9 +3,11 @@
 Alice learns one bit per segment per run; with many runs she could trace Bob's path.  The
 budget counts the runs we answer (as Bob) over a sliding window, on disk
 (:class:`StateStore`), per *certified* drone, per operator and in all -- never per node id or
-anything else a peer only claims -- and every limit holds across restarts.  The runs we start
-(as Alice) are counted apart, per drone, so that a fault cannot make us call a peer without
-end.
+anything else a peer only claims -- and every limit holds across restarts.  A run that ends
+before Bob's last message (which alone opens Alice's answer) taught Alice nothing and is
+given back: a jammer or a forged abort cannot use up a drone's runs.  The runs we start (as
+Alice) are counted apart, per drone, and given back when they bring no result, so that a
+fault cannot make us call a peer without end (failed runs are retried after a pause).
 """
 
 from __future__ import annotations
@@ -67,8 +69,12 @@ class RunLedger:
 
     def admit(
         self, drone: bytes, operator: bytes, operator_limit: int, now: float, role: str = BOB
-    ) -> None:
-        """Check, then count one run."""
+    ) -> int:
+        """Check, then count one run; its ticket, for :meth:`refund`."""
         self.check(drone, operator, operator_limit, now, role)
-        self.store.record_run(now, drone, operator, role)
         self.store.forget_runs(now - 2 * self.limits.window_s)
+        return self.store.record_run(now, drone, operator, role)
+
+    def refund(self, ticket: int) -> None:
+        """Give back a run that taught its requester nothing."""
+        self.store.forget_run(ticket)

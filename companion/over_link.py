@@ -81,8 +81,7 @@ async def _run(
                 return await serve_bob(b, peer, session, bob, charge_cpu=True)
             init = Init.parse(await b.receive(peer, session))
             responder = Responder(fleet[1], init, Route(peer, BOB_NODE, session))
-            arrived = clock.wall() - (clock.now() - b.arrived(peer, session))
-            responder.verify(fleet[0].cert, arrived, 30.0, link.duty_window_s)
+            responder.verify(fleet[0].cert, b.arrived(peer, session), 30.0, link.budget_wait_s)
             return await serve_bob(
                 b, peer, session, bob, secure=responder, boot=bytes(16), charge_cpu=True,
                 first=init.hello,

@@ -479,8 +479,9 @@ def _report(
         c = companions[d.id]
         others = [
             p for k, p in paths.items() if k != d.id and scenario.trusted_pair(d, specs[k])
-        ] or [[(0, 0), (0, 0)]]  # a drone nobody deconflicts with: nothing to flag
-        plain = [any(h) for h in zip(*(path_hits(paths[d.id], o) for o in others), strict=True)]
+        ]  # (a drone nobody deconflicts with has nothing to flag)
+        hits = [path_hits(paths[d.id], o) for o in others]
+        plain = [any(h) for h in zip(*hits, strict=True)] if hits else [False] * d.path.segments
         flagged = sorted(c.flagged)
         false_alarms += sum(1 for k in flagged if k < len(plain) and not plain[k])
         precautionary = [

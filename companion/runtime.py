@@ -32,12 +32,13 @@ from typing import Any
 
 from protocol.errors import ProtocolError
 from protocol.grid import GridSpec
-from protocol.intersection import MAX_SEGMENTS, Alice, Bob, BobKeys, Limits
+from protocol.intersection import MAX_SEGMENTS, Alice, Bob, BobKeys, Limits, State
 from protocol.ot.setup import DEFAULT_SECURITY, ChooserSetup, HolderSetup
 from protocol.suite_compact import message_sizes
 from protocol.wire import Hello, Suite
 
 from .auth.beacon_keys import BeaconKeys
+from .auth.certificate import Certificate
 from .auth.session import (
     BOOT_SIZE,
     AuthenticationError,
@@ -68,7 +69,7 @@ from .link.arq import LinkError
 from .link.endpoint import LinkEndpoint
 from .link.frames import AbortCode
 from .mission import MissionError, MissionItem, point_as_segment
-from .neighbours import NO_CERTIFICATE, Heard, Hearing, Neighbours
+from .neighbours import NO_CERTIFICATE, Heard, Hearing, Neighbour, Neighbours
 from .peers import FRESH_S, Peer, distance_m, near_cut, time_to_meet
 from .planner import OffsetSettings, PlannerError, fixed_segments, plan_offsets
 from .radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
@@ -377,8 +378,7 @@ class Companion:
         )
         now = self.clock.now()
         tags = self.neighbours.tag_keys(self.clock.wall() - self._silence_s)
-        every = max(SIGNED_EVERY_S, SIGNED_EVERY * self.beacon_interval)
-        if self._sign_next or now - self._signed_at >= every:
+        if self._sign_next or now - self._signed_at >= self._signed_every_s:
             self._sign_next, self._signed_at = False, now
             signed = beacon.signed(
                 self.settings.node, self.identity.key, self.beacon_keys.public, self.keys_hash, tags
@@ -397,6 +397,12 @@ class Companion:
         """The configured interval, stretched on duty-cycled links so beacons use at most
         5 % of the budget (EU868 SF9: one beacon per ~5 minutes)."""
         return beacon_interval(self.endpoint.profile, self.settings.beacon_interval_s)
+
+    @property
+    def _signed_every_s(self) -> float:
+        """A signed beacon at least this often: 5 minutes, or every 30th beacon where a duty
+        cycle stretches the interval to minutes."""
+        return max(SIGNED_EVERY_S, SIGNED_EVERY * self.beacon_interval)
 
     @property
     def _asked_every_s(self) -> float:
@@ -503,9 +509,7 @@ class Companion:
             )  # fmt: skip
             self._beacon_now.set()  # let it hear us without waiting an interval
         elif hearing.new_keys:
-            # The peer restarted (a new beacon key): the setups we shared are gone on its side.
-            self.holder_setups.pop(src, None)
-            self.chooser_setups.pop(src, None)
+            self._drop_setups(src)  # it restarted (a new beacon key): they are gone on its side
         levels_changed = peer.beacon.levels != beacon.levels
         peer.heard(beacon, now, self.position[:2])
         if levels_changed and (peer.conflicts or src in self.precaution):
@@ -520,20 +524,24 @@ class Companion:
         due, interval = self._asking.get(node, (now, self._asked_every_s / 2))
         if now < due:
             return False
-        interval = min(2 * interval, max(SIGNED_EVERY_S, SIGNED_EVERY * self.beacon_interval))
+        interval = min(2 * interval, self._signed_every_s)
         self._asking[node] = (now + interval, interval)
         return True
 
     def _forget(self, node: int) -> None:
         self.peers.pop(node, None)
+        self._drop_setups(node)
+
+    def _drop_setups(self, node: int) -> None:
+        """The OT setups we share with ``node`` (both roles)."""
         self.holder_setups.pop(node, None)
         self.chooser_setups.pop(node, None)
 
     def _untrusted(self, hearing: Hearing) -> None:
         """A drone the trust store does not accept: never deconflicted with; logged once, and
         with policy ``alert`` reported as an intruder (at most every ALERT_EVERY_S)."""
-        cert = hearing.cert
-        drone = cert.fingerprint if cert is not None else hearing.node.to_bytes(2, "big")
+        assert hearing.cert is not None  # an untrusted drone is one whose certificate we refused
+        drone = hearing.cert.fingerprint
         if drone not in self._ignored:
             self._ignored.add(drone)
             self.record("untrusted", peer=hearing.node, drone=drone.hex(), reason=hearing.reason)
@@ -755,12 +763,27 @@ class Companion:
             return False
         op = neighbour.operator
         try:
-            self.ledger.admit(
+            ticket = self.ledger.admit(
                 peer.identity, op.key.fingerprint, op.max_runs_per_hour, self.clock.wall(), ALICE
             )
         except BudgetExceeded as exc:
             self.record("budget", peer=peer.node, error=str(exc))
             return False
+        done = await self._compare(peer, phase, horizon, start, path, neighbour)
+        if not done:
+            self.ledger.refund(ticket)  # no result: a retry must not use up our runs
+        return done
+
+    async def _compare(
+        self,
+        peer: Peer,
+        phase: str,
+        horizon: int,
+        start: int,
+        path: list[tuple[int, int]],
+        neighbour: Neighbour,
+    ) -> bool:
+        """The run itself (a fresh OT setup again if the peer lost ours)."""
         peer.role = "alice"
         for attempt in range(2):
             grid = self._grid(path)
@@ -795,7 +818,7 @@ class Companion:
             watchdog = asyncio.create_task(self._watch(peer, alice, grid, needed))
             self._sessions += 1
 
-            def secure(session: int, cert: Any = neighbour.cert) -> Initiator:
+            def secure(session: int, cert: Certificate = neighbour.cert) -> Initiator:
                 route = Route(self.settings.node, peer.node, session)
                 return Initiator(self.identity, cert, route, self.clock.wall())
 
@@ -1078,11 +1101,11 @@ class Companion:
             admitted = await self._admit(peer, session, request)
             if admitted is None:
                 return
-            responder, hello = admitted
+            responder, hello, ticket = admitted
             async with self._radio.turn(ANSWER_NEAR if hello.horizon_m > 0 else ANSWER_FULL):
                 self._sessions += 1
+                bob = Bob(self._bob_path, keys=self.bob_keys, setups=setups, geographic=True)
                 try:
-                    bob = Bob(self._bob_path, keys=self.bob_keys, setups=setups, geographic=True)
                     report = await serve_bob(
                         self.endpoint,
                         peer,
@@ -1095,6 +1118,8 @@ class Companion:
                     )
                 finally:
                     self._sessions -= 1
+                    if bob.state is not State.DONE:  # no last message: Alice learnt nothing
+                        self.ledger.refund(ticket)
         except AuthenticationError as exc:
             self.record("answer_failed", peer=peer, auth=str(exc))
             return
@@ -1119,7 +1144,7 @@ class Companion:
 
     async def _admit(
         self, peer: int, session: int, request: bytes
-    ) -> tuple[Responder, Hello] | None:
+    ) -> tuple[Responder, Hello, int] | None:
         """The checks before any work on a request, cheapest first.  None: the request was
         dropped, aborted (code only) or refused (signed), and the session is closed."""
         wall = self.clock.wall()
@@ -1150,10 +1175,9 @@ class Companion:
         # Fresh: made when its first frame could have left (a duty-cycled sender may wait
         # up to a window for its budget); answered once (the replay cache on disk outlives
         # the window).
-        wait = self.endpoint.profile.duty_window_s if self.endpoint.profile.duty_cycle else 0.0
-        arrived = wall - (self.clock.now() - self.endpoint.arrived(peer, session))
+        wait = self.endpoint.profile.budget_wait_s
         try:
-            responder.verify(neighbour.cert, arrived, skew, wait)
+            responder.verify(neighbour.cert, self.endpoint.arrived(peer, session), skew, wait)
             forget = wall - 2 * (skew + wait)
             if not self.store.first_request(init.replay_key, wall, forget):
                 raise AuthenticationError("a request answered before (a replay)")
@@ -1180,7 +1204,7 @@ class Companion:
             await self._refuse(peer, session, responder, Refusal.SIZE)
             return None
         try:
-            self.ledger.admit(
+            ticket = self.ledger.admit(
                 known.identity, operator.key.fingerprint, operator.max_runs_per_hour, wall, BOB
             )
         except BudgetExceeded as exc:
@@ -1189,7 +1213,7 @@ class Companion:
             return None
         known.role = "bob"
         known.conflicts.clear()  # as Bob we do not adjust for this peer
-        return responder, hello
+        return responder, hello, ticket
 
     async def _refuse(self, peer: int, session: int, responder: Responder, code: Refusal) -> None:
         self.record("refused", peer=peer, reason=code.name)

@@ -49,8 +49,16 @@ class StateStore:
 
     # ------------------------------------------------------------------ runs
 
-    def record_run(self, t: float, drone: bytes, operator: bytes, role: str) -> None:
-        self._db.execute("INSERT INTO runs VALUES (?, ?, ?, ?)", (t, drone, operator, role))
+    def record_run(self, t: float, drone: bytes, operator: bytes, role: str) -> int:
+        """Count one run; its ticket (to give it back with :meth:`forget_run`)."""
+        cursor = self._db.execute(
+            "INSERT INTO runs VALUES (?, ?, ?, ?)", (t, drone, operator, role)
+        )
+        assert cursor.lastrowid is not None
+        return cursor.lastrowid
+
+    def forget_run(self, ticket: int) -> None:
+        self._db.execute("DELETE FROM runs WHERE rowid = ?", (ticket,))
 
     def count_runs(
         self,

@@ -166,6 +166,11 @@ def _round_in(point: FPoint, r: int) -> Point:
     return (max(-r, min(r, round(point[0]))), max(-r, min(r, round(point[1]))))
 
 
+def pad_path(path: Sequence[Point], segments: int) -> tuple[Point, ...]:
+    """Repeat the last vertex: zero-length segments at an existing vertex change no answer."""
+    return tuple(path) + (path[-1],) * (segments + 1 - len(path))
+
+
 DEAD_LINE = (0, 0, 1)  # (dX, dY, K) of a link: orient(C, D, A) = 1 for every A, never a hit
 
 
@@ -240,5 +245,4 @@ def fit_to_box(path: Sequence[Point], r: int, n: int) -> BobPath:
         return BobPath(((r, r),) * (n + 1), frozenset(range(n)))
     if len(points) - 1 > n:
         return BobPath(((r, r),) * (n + 1), frozenset(range(n)), everywhere=True)
-    # zero-length segments at the last vertex change no answer
-    return BobPath(tuple(points) + (points[-1],) * (n + 1 - len(points)), frozenset(links))
+    return BobPath(pad_path(points, n), frozenset(links))

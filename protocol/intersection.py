@@ -66,11 +66,6 @@ class Limits:
         return segments
 
 
-def pad_path(path: Sequence[Point], segments: int) -> tuple[Point, ...]:
-    """Repeat the last vertex: zero-length segments at an existing vertex change no answer."""
-    return tuple(path) + (path[-1],) * (segments + 1 - len(path))
-
-
 class Kind(enum.IntEnum):
     O1 = 0  # orient(A_i, A_i+1, B_k): Alice segment i, Bob vertex k
     T = 1  # projection of Bob vertex k on Alice segment i
@@ -370,16 +365,15 @@ class Bob:
             path = bob_path(self.source, hello, geographic=self.geographic, limits=self.limits)
         except InputRangeError as exc:  # Bob's own input (fewer than two points, bad degE7)
             raise LocalProtocolError(f"this path cannot be compared: {exc}") from exc
-        n = path.segments
         if hello.suite is Suite.COMPACT:
             from .suite_compact import CompactBob
 
-            return CompactBob(hello, path, n, self.setups)
+            return CompactBob(hello, path, self.setups)
         from .suite_paper import PaperBob
 
         if self.keys is None:
             raise LocalProtocolError("the paper suite needs Bob's keys")
-        return PaperBob(hello, path, n, self.keys, insecure=self.insecure)
+        return PaperBob(hello, path, self.keys, insecure=self.insecure)
 
     def abort(self) -> None:
         if self._impl is not None:

@@ -41,10 +41,10 @@ from dataclasses import dataclass
 from .circuit import Circuit
 from .encoding import Reader
 from .errors import InputRangeError, LocalProtocolError, RemoteProtocolError, UnknownSetupError
-from .geometry import BobPath, Point, orient_coefficients, projection_key
+from .geometry import BobPath, Point, orient_coefficients, pad_path, projection_key
 from .gmw import Gmw, plan_groups, rot_count, rounds
 from .grid import GridSpec
-from .intersection import AliceSide, BobSide, Kind, Layout, Limits, State, pad_path
+from .intersection import AliceSide, BobSide, Kind, Layout, Limits, State
 from .millionaire import (
     DEFAULT_DIGIT_BITS,
     MAX_DIGIT_BITS,
@@ -366,9 +366,9 @@ class CompactBob(BobSide):
         self,
         hello: Hello,
         path: BobPath,
-        n: int,
         setups: MutableMapping[bytes, ChooserSetup],
     ) -> None:
+        n = path.segments
         self.hello, self.path, self.n, self.m = hello, path, n, hello.m
         self.grid = hello.grid
         offer = Offer.from_bytes(hello.offer)

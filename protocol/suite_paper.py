@@ -40,7 +40,7 @@ from .comparison import (
 from .dgk import DGKPublicKey
 from .encoding import Reader
 from .errors import LocalProtocolError, RemoteProtocolError
-from .geometry import BobPath, Point, orient_coefficients, projection_key
+from .geometry import BobPath, Point, orient_coefficients, pad_path, projection_key
 from .grid import GridSpec
 from .hegates import HeGatesAlice, HeGatesBob
 from .intersection import (
@@ -52,7 +52,6 @@ from .intersection import (
     Layout,
     Limits,
     State,
-    pad_path,
 )
 from .paillier import PaillierCiphertext, PaillierPublicKey
 from .params import check_kappa
@@ -285,9 +284,8 @@ class PaperAlice(AliceSide):
 
 
 class PaperBob(BobSide):
-    def __init__(
-        self, hello: Hello, path: BobPath, n: int, keys: BobKeys, *, insecure: bool
-    ) -> None:
+    def __init__(self, hello: Hello, path: BobPath, keys: BobKeys, *, insecure: bool) -> None:
+        n = path.segments
         try:
             check_kappa(hello.kappa, insecure)
         except LocalProtocolError as exc:

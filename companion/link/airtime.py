@@ -67,6 +67,11 @@ class LinkProfile:
         return (frame_bytes + 8) * 8 / self.bitrate  # 8 bytes preamble + sync word
 
     @property
+    def budget_wait_s(self) -> float:
+        """Longest a frame may wait for the duty-cycle budget before it leaves: a window."""
+        return self.duty_window_s if self.duty_cycle else 0.0
+
+    @property
     def max_frame(self) -> int:
         """Largest frame allowed: the MTU, the PHY limit, and the dwell time (US915)."""
         limit = min(self.mtu, PHY_MAX_FRAME)

@@ -209,9 +209,10 @@ class LinkEndpoint:
             return await self._accept.get()
 
     def arrived(self, peer: int, session: int) -> float:
-        """Link time the first fragment of a session the peer opened reached us (what a
-        request's own time is checked against: its transfer may take long)."""
-        return self._session(peer, session).arrived
+        """When (Unix seconds, :meth:`Clock.wall`) the first fragment of a session the peer
+        opened reached us: what a request's own time is checked against (its transfer may
+        take long)."""
+        return self.clock.wall() - (self.clock.now() - self._session(peer, session).arrived)
 
     def close_session(self, peer: int, session: int) -> None:
         """Forget a session: its buffers are freed, late frames are ignored."""

@@ -44,3 +44,14 @@ def test_replay_cache_and_counters_persist(tmp_path: Path) -> None:
     assert reopened.first_request(b"key", 500.0, 200.0)  # forgotten after its window
     assert reopened.last_counter(b"drone") == 42 and reopened.last_counter(b"other") is None
     assert (tmp_path / "state").stat().st_mode & 0o777 == 0o700
+
+
+def test_a_run_given_back_frees_its_place(tmp_path: Path) -> None:
+    """A run that taught nothing (it ended before Bob's last message) is given back: aborted
+    runs, however many, never use up a drone's budget."""
+    ledger = RunLedger(StateStore(tmp_path), RunLimits(per_drone=1, total=5, window_s=3600))
+    for t in range(10):  # ten runs jammed or aborted, each given back
+        ledger.refund(ledger.admit(b"drone-a", b"op-x", 4, float(t), BOB))
+    ledger.admit(b"drone-a", b"op-x", 4, 20.0, BOB)
+    with pytest.raises(BudgetExceeded):
+        ledger.admit(b"drone-a", b"op-x", 4, 21.0, BOB)

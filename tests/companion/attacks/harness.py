@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +19,7 @@ from companion.beacon import keys_hash as beacon_keys_hash
 from companion.exchange import RunReport, run_alice
 from companion.flightpath import flight_path
 from companion.link import PROFILES, Channel, Clock, Impairments, LinkEndpoint, SimMedium
-from companion.link.frames import BROADCAST, CRC, OVERHEAD, Flag, Frame, FrameType, decode_frame
+from companion.link.frames import OVERHEAD, Flag, Frame, FrameType, decode_frame
 from companion.mission import MissionItem
 from companion.missionfile import read_plan
 from companion.replay_fleet import make_fleet
@@ -104,16 +103,6 @@ class Tap:
         await self.inner.close()
 
 
-def forge(frame: Frame, **changes: Any) -> bytes:
-    """A frame with some fields changed and a good CRC (the CRC stops noise, not people)."""
-    fields = {f: getattr(frame, f) for f in Frame.__dataclass_fields__} | changes
-    return Frame(**fields).encode()
-
-
-def raw_crc_ok(data: bytes) -> bool:
-    return zlib.crc32(data[: -CRC.size]) == CRC.unpack(data[-CRC.size :])[0]
-
-
 @dataclass
 class World:
     clock: Clock
@@ -123,7 +112,6 @@ class World:
     autopilots: dict[int, FakeAutopilot]
     taps: dict[int, Tap]
     credentials: dict[int, Credentials]
-    tasks: list[asyncio.Task[None]] = field(default_factory=list)
     _injector: Any = None
 
     def events(self, node: int, kind: str) -> list[dict[str, Any]]:
@@ -145,6 +133,10 @@ class World:
         writes into the frame: the medium's node 0xFFFE only carries them)."""
         if self._injector is None:
             self._injector = self.medium.attach(0xFFFE)
+        for _ in range(200):  # it listens before it talks, as a radio would (20 s at most)
+            if not self._injector.channel_busy():
+                break
+            await self.clock.sleep(0.1)
         await self._injector.transmit(data, PROFILE.airtime(len(data)))
         await self.clock.sleep(PROFILE.turnaround_s)
 
@@ -219,10 +211,6 @@ async def world(
         for work in (c._certificates, c._beacons, c._listen, c._serve, c._alice_loop):
             c._tasks.append(asyncio.create_task(work()))
     return w
-
-
-def beacons_of(sniffer: Sniffer, node: int) -> list[Frame]:
-    return [f for f in sniffer.of(FrameType.BEACON, node) if f.dst == BROADCAST]
 
 
 @dataclass
