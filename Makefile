@@ -14,12 +14,14 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: $(STAMP)
+	@mkdir -p out
 	$(PY) -m companion replay sitl_configs/scenarios/crossing.toml \
-		--out out/crossing.json --plot out/crossing.png
+		--out out/crossing.json --plot out/crossing.png --export out/crossing
 
 # The crossing on two PX4 SITL (SIH) vehicles: make demo-px4 PX4_SITL=/path/to/px4-sitl
 demo-px4: $(STAMP)
 	@test -n "$(PX4_SITL)" || { echo "error: set PX4_SITL to a PX4 SITL build (bin/px4, etc/), e.g. make demo-px4 PX4_SITL=/path/to/px4-sitl" >&2; exit 2; }
+	@mkdir -p out
 	$(PY) -m companion replay sitl_configs/scenarios/crossing.toml --px4 "$(PX4_SITL)" \
 		--out out/crossing-px4.json --plot out/crossing-px4.png
 

@@ -1,5 +1,6 @@
-"""Command line: ``python -m companion {run, keys, replay, compare, bench-link, radio-demo,
-link-hub, mock-autopilot, mission show}``."""
+"""Command line of the flight companion (``drone-deconflict`` or ``python -m companion``):
+run, keys, replay, compare, bench-link, radio-demo, link-hub, mock-autopilot, mission show.
+Errors are one line and exit 2 (:mod:`protocol.cli`)."""
 
 from __future__ import annotations
 
@@ -9,12 +10,21 @@ import contextlib
 import json
 import signal
 import sys
+from pathlib import Path
 
-from protocol.errors import ProtocolError
+from protocol import cli
 
-from . import keys_cli
+from . import keys_cli, logs
 from .link import Channel, Clock, Impairments
+from .link.airtime import PHY_MAX_FRAME, PROFILES
 from .link.udp import UdpHub
+
+DESCRIPTION = (
+    "The flight companion of private drone deconfliction: it reads the mission through "
+    "MAVSDK, compares paths with peer drones over the radio without showing them, and flies "
+    "conflicting segments higher."
+)
+MAX_INSTANCE = 253  # system id I + 1 <= 254 (255 is the ground station)
 
 DEFAULT_HOME = (47.397742, 8.545594, 488.0)  # PX4 SITL's default home
 
@@ -89,10 +99,9 @@ async def _mock(args: argparse.Namespace) -> int:
         )
         await stop.wait()
     if args.trajectory:
-        with open(args.trajectory, "w", encoding="utf-8") as handle:
-            handle.write("t_s,lat,lon,alt_m\n")
-            for t, lat, lon, alt in mock.trajectory:
-                handle.write(f"{t:.2f},{lat:.7f},{lon:.7f},{alt:.2f}\n")
+        from .replay_export import track_csv
+
+        cli.write_atomic(args.trajectory, track_csv(mock.trajectory))
     return 0
 
 
@@ -100,12 +109,15 @@ def _mission_show(args: argparse.Namespace) -> int:
     from pymavlink.dialects.v20 import common as mavlink
 
     from .flightpath import flight_path
+    from .mission import MissionError
     from .missionfile import read_mission_file
 
     plan = read_mission_file(args.file)
-    items = plan.for_autopilot(ardupilot=args.ardupilot)
-    home = plan.home_degE7
-    path = flight_path(items, home, ardupilot=args.ardupilot)
+    try:
+        items = plan.for_autopilot(ardupilot=args.ardupilot)
+        path = flight_path(items, plan.home_degE7, ardupilot=args.ardupilot)
+    except MissionError as exc:
+        raise MissionError(f"{args.file}: {exc}") from None
     commands = mavlink.enums["MAV_CMD"]
 
     def name(command: int) -> str:
@@ -160,14 +172,11 @@ async def _run(args: argparse.Namespace) -> int:
             "offset.max_altitude_m": args.max_altitude,
         },
     )
-    logging.basicConfig(
-        level=config.log_level.upper(),
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    )
+    logs.setup(config.log_level, args.log_json, mavsdk=True)
     log = logging.getLogger("companion")
     settings, link = config.companion, config.link
     if config.credentials is None:
-        raise ValueError(
+        raise cli.InputError(
             "the companion needs an identity: [identity] key, certificate and [[trust.operator]] "
             "in --config (python -m companion keys init|certify)"
         )
@@ -204,40 +213,35 @@ async def _run(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    import json
-    import logging
-    from pathlib import Path
-
     from .replay import PX4_SPEED_MAX, format_report, load_scenario, plot_report, run_replay
+    from .replay_export import export
     from .sim_px4 import Px4Error, find_build
 
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    scenario = load_scenario(args.scenario)
+    level = args.log_level or ("info" if args.log_json else "warning")
+    logs.setup(level, args.log_json, stderr_level=args.log_level or "warning", mavsdk=True)
+    scenario = load_scenario(args.scenario)  # all checked before anything starts
     try:
         build = find_build(args.px4) if args.px4 else None
-        replay = asyncio.run(
-            run_replay(
-                scenario,
-                progress=not args.json,
-                px4=build,
-                px4_speed_max=PX4_SPEED_MAX if args.px4_speed is None else args.px4_speed,
-            )
-        )
     except Px4Error as exc:
-        print(f"error: PX4 SITL: {exc}", file=sys.stderr)
-        return 2
+        raise cli.InputError(f"PX4 SITL: {exc}") from None
+    replay = asyncio.run(
+        run_replay(
+            scenario,
+            progress=not args.json,
+            px4=build,
+            px4_speed_max=PX4_SPEED_MAX if args.px4_speed is None else args.px4_speed,
+        )
+    )
     report = replay.report
     if args.out:
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_suffix(out.suffix + ".tmp")
-        tmp.write_text(json.dumps(report, indent=2) + "\n")
-        tmp.replace(out)
+        cli.write_atomic(args.out, json.dumps(report, indent=2) + "\n")
     if args.plot:
         plot_report(replay, args.plot)
+    if args.export:
+        for path in export(replay, args.export):
+            print(f"wrote {path}", file=sys.stderr)
     print(json.dumps(report, indent=2) if args.json else format_report(report))
-    ok = report["finished"] and report["conflicts_resolved"] == report["conflicts"]
-    return 0 if ok and report["false_alarms"] == 0 else 1
+    return cli.EXIT_OK if report["ok"] else cli.EXIT_NEGATIVE
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -249,6 +253,12 @@ def _compare(args: argparse.Namespace) -> int:
 
     link = profile(args.link)
     if args.mtu is not None:
+        largest = link.with_mtu(PHY_MAX_FRAME).max_frame
+        if args.mtu > largest:
+            raise cli.InputError(
+                f"--mtu {args.mtu}: {link.name} carries at most {largest} bytes per frame"
+                + (f" ({link.dwell_s * 1000:.0f} ms dwell time)" if link.dwell_s else "")
+            )
         link = link.with_mtu(args.mtu)
     result = compare_over_link(
         args.alice,
@@ -265,14 +275,12 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _bench_link(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from protocol.bench_paths import DEFAULT_DATA
 
     from .over_link import bench_link, format_link
 
     data = Path(args.data) if args.data else DEFAULT_DATA
-    profiles = args.profiles.split(",") if args.profiles else None
+    profiles = list(args.profiles) if args.profiles else None
     result = bench_link(
         data, profiles, suite=args.suite, range_=args.range, progress=not args.quiet
     )
@@ -280,81 +288,178 @@ def _bench_link(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m companion", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
+def _profile(text: str) -> str:
+    """A link profile name we know."""
+    if text not in PROFILES:
+        raise argparse.ArgumentTypeError(
+            f"unknown link profile {text!r}; known: {', '.join(PROFILES)}"
+        )
+    return text
+
+
+def _profiles(text: str) -> tuple[str, ...]:
+    """Comma-separated link profile names, each one we know."""
+    return tuple(_profile(p.strip()) for p in text.split(","))
+
+
+def _log_flags(parser: argparse.ArgumentParser, level_help: str) -> None:
+    """--log-level and --log-json (:mod:`companion.logs`)."""
+    parser.add_argument(
+        "--log-level", choices=["debug", "info", "warning", "error"], help=level_help
+    )
+    parser.add_argument(
+        "--log-json", type=cli.output_file(), help="append every log record as JSON lines"
+    )
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = cli.Parser(prog="drone-deconflict", description=DESCRIPTION)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    probability = cli.probability
     hub = sub.add_parser("link-hub", help="a simulated radio channel shared over UDP")
-    hub.add_argument("--host", default="127.0.0.1")
-    hub.add_argument("--port", type=int, default=14600)
-    hub.add_argument("--loss", type=float, default=0.0)
-    hub.add_argument("--corrupt", type=float, default=0.0)
-    hub.add_argument("--duplicate", type=float, default=0.0)
-    hub.add_argument("--reorder", type=float, default=0.0)
-    hub.add_argument("--latency", type=float, default=0.002, help="seconds")
-    hub.add_argument("--seed", type=int, default=None)
-    hub.add_argument("--time-scale", type=float, default=1.0)
-    hub.add_argument("--no-collisions", action="store_true")
+    hub.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    hub.add_argument(
+        "--port", type=cli.listen_port, default=14600, help="UDP port to listen on (0: any)"
+    )
+    hub.add_argument("--loss", type=probability, default=0.0, help="frame loss probability")
+    hub.add_argument("--corrupt", type=probability, default=0.0, help="corruption probability")
+    hub.add_argument("--duplicate", type=probability, default=0.0, help="duplication rate")
+    hub.add_argument("--reorder", type=probability, default=0.0, help="reordering probability")
+    hub.add_argument("--latency", type=cli.number(0, 60), default=0.002, help="seconds")
+    hub.add_argument("--seed", type=cli.seed, default=None, help="channel seed (random if unset)")
+    hub.add_argument(
+        "--time-scale", type=cli.number(0, 10_000, above=True), default=1.0, help="speed-up"
+    )
+    hub.add_argument("--no-collisions", action="store_true", help="overlapping frames both pass")
+    hub.set_defaults(func=lambda a: asyncio.run(_hub(a)))
 
     mock = sub.add_parser("mock-autopilot", help="a MAVLink autopilot for tests and replays")
-    mock.add_argument("--mission", help=".plan or QGC WPL 110 file to start with")
-    mock.add_argument("--instance", type=int, default=0, help="binds 14580+I, sends to 14540+I")
+    mock.add_argument(
+        "--mission", type=cli.existing_file, help=".plan or QGC WPL 110 file to start with"
+    )
+    mock.add_argument(
+        "--instance",
+        type=cli.integer(0, MAX_INSTANCE),
+        default=0,
+        help="binds UDP 14580+I, sends to 14540+I, system id I+1",
+    )
     mock.add_argument("--ardupilot", action="store_true", help="ArduPilot personality")
     home_help = "home %s (default: the mission file's home, else %s)"
-    for key, default in zip(("lat", "lon", "alt"), DEFAULT_HOME, strict=True):
+    bounds = {"lat": cli.number(-90, 90), "lon": cli.number(-180, 180)}
+    bounds["alt"] = cli.number(-500, 9000)
+    for key, value in zip(("lat", "lon", "alt"), DEFAULT_HOME, strict=True):
         mock.add_argument(
-            f"--home-{key}", type=float, default=None, help=home_help % (key, default)
+            f"--home-{key}", type=bounds[key], default=None, help=home_help % (key, value)
         )
-    mock.add_argument("--speed", type=float, default=10.0, help="cruise m/s")
-    mock.add_argument("--time-scale", type=float, default=1.0)
-    mock.add_argument("--drop-every", type=int, default=0, help="drop every k-th mission reply")
-    mock.add_argument("--latency", type=float, default=0.0, help="seconds added to replies")
+    mock.add_argument("--speed", type=cli.number(0, 100, above=True), default=10.0, help="m/s")
+    mock.add_argument(
+        "--time-scale", type=cli.number(0, 10_000, above=True), default=1.0, help="speed-up"
+    )
+    mock.add_argument(
+        "--drop-every", type=cli.integer(0), default=0, help="drop every k-th mission reply"
+    )
+    mock.add_argument(
+        "--latency", type=cli.number(0, 60), default=0.0, help="seconds added to replies"
+    )
     mock.add_argument("--ignore", action="append", help="MAVLink message name to ignore")
-    mock.add_argument("--reject-upload", type=int, default=None, help="MAV_MISSION_RESULT")
-    mock.add_argument("--vanish-after", type=float, default=None, help="seconds")
-    mock.add_argument("--trajectory", help="write the flown trajectory (CSV) on exit")
+    mock.add_argument(
+        "--reject-upload", type=cli.integer(1, 255), default=None, help="MAV_MISSION_RESULT"
+    )
+    mock.add_argument(
+        "--vanish-after", type=cli.number(0, above=True), default=None, help="seconds"
+    )
+    mock.add_argument(
+        "--trajectory",
+        type=cli.output_file(".csv"),
+        help="write the flown trajectory (CSV) on exit",
+    )
+    mock.set_defaults(func=lambda a: asyncio.run(_mock(a)))
 
     mission = sub.add_parser("mission", help="mission files")
-    mission_sub = mission.add_subparsers(dest="action", required=True)
+    mission_sub = mission.add_subparsers(dest="action", required=True, metavar="ACTION")
     show = mission_sub.add_parser("show", help="print a mission and its segments")
-    show.add_argument("file")
+    show.add_argument("file", type=cli.existing_file, help=".plan or QGC WPL 110 file")
     show.add_argument("--ardupilot", action="store_true", help="item 0 is home")
+    show.set_defaults(func=_mission_show)
 
     compare = sub.add_parser("compare", help="the encrypted path comparison over the radio link")
     compare.add_argument(
         "alice",
+        type=cli.existing_file,
         help="Alice's paths: paper format (x,y)(x,y)..., or a mission file (.plan, QGC WPL): "
         "the path it flies",
     )
-    compare.add_argument("bob", help="Bob's paths, same format as Alice's")
+    compare.add_argument("bob", type=cli.existing_file, help="Bob's paths, same format as Alice's")
     compare.add_argument(
         "--link",
         metavar="PROFILE",
         required=True,
-        help="eu868-sf7, eu868-sf9, eu868-sf12, eu868-g3-sf7, us915-sf7, us915-sf9 or ideal",
+        type=_profile,
+        help=f"link profile: {', '.join(PROFILES)}",
     )
-    compare.add_argument("--suite", choices=["compact", "paper"], default="compact")
-    compare.add_argument("--range", type=int, default=None, help="public grid range R")
-    compare.add_argument("--loss", type=float, default=0.0, help="frame loss probability")
-    compare.add_argument("--corrupt", type=float, default=0.0, help="frame corruption probability")
-    compare.add_argument("--seed", type=int, default=None, help="channel seed")
-    compare.add_argument("--mtu", type=int, default=None, help="radio frame size, 32..255 bytes")
+    compare.add_argument(
+        "--suite",
+        choices=["compact", "paper"],
+        default="compact",
+        help="compact (OT + EC-ElGamal) or paper (Paillier + DGK)",
+    )
+    compare.add_argument(
+        "--range",
+        type=cli.integer(1, 1 << 28),
+        default=None,
+        help="public grid range R (default: the files' extent)",
+    )
+    compare.add_argument("--loss", type=probability, default=0.0, help="frame loss probability")
+    compare.add_argument("--corrupt", type=probability, default=0.0, help="corruption probability")
+    compare.add_argument(
+        "--seed", type=cli.seed, default=None, help="channel seed (random if unset)"
+    )
+    compare.add_argument(
+        "--mtu",
+        type=cli.integer(32, PHY_MAX_FRAME),
+        default=None,
+        help="radio frame size in bytes (default: the profile's)",
+    )
     compare.add_argument("--json", action="store_true", help="machine-readable output")
+    compare.set_defaults(func=_compare)
 
     bench = sub.add_parser("bench-link", help="the paper's pairs and an 8x8 run over each profile")
-    bench.add_argument("--data", help="directory with the paper's data")
-    bench.add_argument("--profiles", help="comma-separated link profiles (default all)")
-    bench.add_argument("--suite", choices=["compact", "paper"], default="compact")
-    bench.add_argument("--range", type=int, default=99, help="coordinate range of the 8x8 run")
+    bench.add_argument("--data", help="directory with the paper's data (default: the bundled copy)")
+    bench.add_argument(
+        "--profiles", type=_profiles, help="comma-separated link profiles (default: all)"
+    )
+    bench.add_argument(
+        "--suite", choices=["compact", "paper"], default="compact", help="cryptographic suite"
+    )
+    bench.add_argument(
+        "--range", type=cli.integer(1, 1 << 28), default=99, help="coordinate range of the 8x8 run"
+    )
     bench.add_argument("--json", action="store_true", help="machine-readable output")
     bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    bench.set_defaults(func=_bench_link)
 
-    sub.add_parser("radio-demo", help="the demo's comparison over simulated LoRa profiles")
+    demo = sub.add_parser("radio-demo", help="the demo's comparison over simulated LoRa profiles")
+    demo.set_defaults(func=lambda a: _radio_demo())
 
     replay = sub.add_parser("replay", help="fly a scenario: mock autopilots, MAVSDK, companions")
-    replay.add_argument("scenario", help="scenario TOML (see sitl_configs/scenarios/)")
+    replay.add_argument(
+        "scenario", type=cli.existing_file, help="scenario TOML (see sitl_configs/scenarios/)"
+    )
     replay.add_argument("--json", action="store_true", help="print the report as JSON")
-    replay.add_argument("--out", help="also write the JSON report to this file")
-    replay.add_argument("--plot", help="write a PNG: ground tracks and altitude profiles")
+    replay.add_argument(
+        "--out", type=cli.output_file(".json"), help="also write the JSON report to this file"
+    )
+    replay.add_argument(
+        "--plot",
+        type=cli.output_file(".png", ".pdf", ".svg"),
+        help="write the encounter's plot (tracks, separation, altitude): PNG, PDF or SVG",
+    )
+    replay.add_argument(
+        "--export",
+        type=cli.output_dir,
+        metavar="DIR",
+        help="write flown tracks (CSV), the encounter as KML (Google Earth) and GeoJSON",
+    )
     replay.add_argument(
         "--px4",
         metavar="DIR",
@@ -362,56 +467,53 @@ def main(argv: list[str] | None = None) -> int:
     )
     replay.add_argument(
         "--px4-speed",
-        type=float,
+        type=cli.number(0, 100, above=True),
         default=None,
-        help="largest SIH speed factor, the replay's time scale with --px4 (default 5: two "
-        "vehicles, their companions and the protocol keep up on 2 cores)",
+        help="largest SIH speed factor, the replay's time scale with --px4 (default: 5, at "
+        "which two vehicles, their companions and the protocol keep up on 2 cores)",
     )
+    _log_flags(replay, "companions' log on stderr (default: warning)")
+    replay.set_defaults(func=_replay)
 
     run = sub.add_parser("run", help="the companion process beside one autopilot")
-    run.add_argument("--config", help="TOML settings, [identity] and [trust] included")
-    run.add_argument("--node", type=int, help="node id on the radio")
+    run.add_argument(
+        "--config", type=cli.existing_file, help="TOML settings, [identity] and [trust] included"
+    )
+    run.add_argument("--node", type=cli.integer(1, 0xFFFE), help="node id on the radio")
     run.add_argument("--autopilot", help="MAVSDK URL, e.g. udpin://0.0.0.0:14540")
     run.add_argument("--transport", choices=["udp", "serial"], help="link transport")
-    run.add_argument("--profile", help="link profile, e.g. us915-sf7")
+    run.add_argument("--profile", type=_profile, help=f"link profile: {', '.join(PROFILES)}")
     run.add_argument("--hub", help="link hub HOST:PORT (udp transport)")
     run.add_argument("--serial", help="serial device of the LoRa modem")
-    run.add_argument("--offset", type=float, help="altitude offset in metres")
-    run.add_argument("--max-altitude", type=float, help="metres above home")
-    run.add_argument("--log-level", choices=["debug", "info", "warning", "error"])
+    run.add_argument("--offset", type=cli.number(0, 500, above=True), help="altitude offset, m")
+    run.add_argument(
+        "--max-altitude", type=cli.number(0, 10_000, above=True), help="metres above home"
+    )
+    _log_flags(run, "log level (default: the config's, else info)")
+    run.set_defaults(func=_run_command)
 
     keys_cli.add_parser(sub)
+    cli.add_common(parser)
+    return parser
 
-    args = parser.parse_args(argv)
-    if args.command == "keys":
-        return keys_cli.run(args)
-    try:
-        if args.command == "run":
-            from .autopilot import AutopilotError
 
-            try:
-                return asyncio.run(_run(args))
-            except AutopilotError as exc:
-                print(f"error: {exc}", file=sys.stderr)
-                return 1
-        if args.command == "replay":
-            return _replay(args)
-        if args.command == "compare":
-            return _compare(args)
-        if args.command == "bench-link":
-            return _bench_link(args)
-        if args.command == "radio-demo":
-            from .over_link import radio_demo
+def _radio_demo() -> int:
+    from .over_link import radio_demo
 
-            return radio_demo()
-        if args.command == "link-hub":
-            return asyncio.run(_hub(args))
-        if args.command == "mock-autopilot":
-            return asyncio.run(_mock(args))
-        return _mission_show(args)
-    except (ValueError, OSError, ProtocolError) as exc:  # MissionError is a ValueError
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    return radio_demo()
+
+
+def _run_command(args: argparse.Namespace) -> int:
+    return asyncio.run(_run(args))
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .autopilot import AutopilotError
+    from .link.arq import LinkError
+    from .sim_px4 import Px4Error
+
+    args = _parser().parse_args(argv)
+    return cli.run(args.func, args, (AutopilotError, LinkError, Px4Error))
 
 
 if __name__ == "__main__":

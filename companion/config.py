@@ -45,11 +45,12 @@
 
 from __future__ import annotations
 
-import tomllib
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from protocol.intersection import MAX_SEGMENTS
 from protocol.ot.setup import DEFAULT_SECURITY, SECURITY_LEVELS
 from protocol.wire import Suite
 
@@ -58,13 +59,16 @@ from .auth.keys import KeyFileError, PublicKey, read_private_key, read_public_ke
 from .auth.session import Identity
 from .auth.trust import Operator, TrustStore, UnknownPeers
 from .failsafe import Action, FailsafeSettings
-from .link.airtime import profile as link_profile
+from .link.airtime import PROFILES
 from .planner import OffsetSettings
 from .runtime import CompanionSettings, Credentials
+from .tables import Table, TableError, load_toml
+
+PROFILE_NAMES = tuple(PROFILES)
 
 
-class ConfigError(ValueError):
-    """The configuration is invalid; says which key."""
+class ConfigError(TableError):
+    """The configuration is invalid; says which file and key."""
 
 
 @dataclass(frozen=True)
@@ -89,42 +93,37 @@ def _path(base: Path, value: str) -> Path:
     return path if path.is_absolute() else base / path
 
 
-def _credentials(doc: dict[str, Any], base: Path, node: int) -> Credentials | None:
+def _credentials(doc: Table, base: Path, node: int) -> Credentials | None:
     """[identity] and [trust]: our key and certificate, the operators we trust."""
-    identity = doc.get("identity")
-    if identity is None:
+    if not doc.has("identity"):
+        doc.known.add("trust")  # read with an identity only (the companion refuses without)
         return None
+    identity = doc.table("identity")
     try:
-        key = read_private_key(_path(base, _get(identity, "key", str, None)))
-        cert_file = _path(base, _get(identity, "certificate", str, None))
-        try:
-            cert = Certificate.decode(cert_file.read_bytes())
-        except OSError as exc:
-            raise ConfigError(f"identity.certificate: {cert_file}: {exc.strerror}") from None
-        except CertificateError as exc:
-            raise ConfigError(f"identity.certificate: {cert_file}: {exc}") from None
-        if cert.drone != key.public:
-            raise ConfigError(f"identity: {cert_file} certifies another key than identity.key")
-        if cert.node != node:
-            raise ConfigError(f"identity: {cert_file} is for node {cert.node}, not node {node}")
-        state = _path(base, _get(identity, "state_dir", str, "state"))
+        key = read_private_key(_path(base, identity.text("key")))
     except KeyFileError as exc:
-        raise ConfigError(f"identity.key: {exc}") from None
-    trust = doc.get("trust", {})
-    policy = _get(trust, "unknown_peers", str, "ignore")
-    policies = {p.value: p for p in UnknownPeers}
-    if policy not in policies:
-        raise ConfigError(f"trust.unknown_peers: one of {', '.join(policies)}")
+        raise identity.fail(str(exc), "key") from None
+    cert_file = _path(base, identity.text("certificate"))
+    try:
+        cert = Certificate.decode(cert_file.read_bytes())
+    except OSError as exc:
+        raise identity.fail(f"{cert_file}: {exc.strerror}", "certificate") from None
+    except CertificateError as exc:
+        raise identity.fail(f"{cert_file}: {exc}", "certificate") from None
+    if cert.drone != key.public:
+        raise identity.fail(f"{cert_file} certifies another key than identity.key")
+    if cert.node != node:
+        raise identity.fail(f"{cert_file} is for node {cert.node}, not node {node}")
+    state = _path(base, identity.text("state_dir", "state"))
+    trust = doc.table("trust")
+    policy = trust.text("unknown_peers", "ignore", [p.value for p in UnknownPeers])
     operators = []
-    entries = trust.get("operator", [])
-    if not isinstance(entries, list) or not entries:
-        raise ConfigError("trust.operator: at least one [[trust.operator]] (name, key)")
+    entries = trust.tables("operator", "[[trust.operator]]")
+    if not entries:
+        raise trust.fail("at least one [[trust.operator]] (name, key) is needed")
     for k, entry in enumerate(entries):
-        where = f"trust.operator[{k}]"
-        if not isinstance(entry, dict):
-            raise ConfigError(f"{where}: a table")
-        name = _get(entry, "name", str, f"operator{k}")
-        text = _get(entry, "key", str, None)
+        name = entry.text("name", f"operator{k}")
+        text = entry.text("key")
         try:
             public = (
                 PublicKey.parse(text)
@@ -135,124 +134,92 @@ def _credentials(doc: dict[str, Any], base: Path, node: int) -> Credentials | No
                 Operator(
                     name,
                     public,
-                    _get(entry, "max_segments", int, 256),
-                    _get(entry, "max_runs_per_hour", int, 24),
+                    entry.integer("max_segments", 256, low=1, high=MAX_SEGMENTS),
+                    entry.integer("max_runs_per_hour", 24, low=1),
                 )
             )
         except (KeyFileError, ValueError) as exc:
-            raise ConfigError(f"{where} ({name}): {exc}") from None
-    return Credentials(Identity(key, cert), TrustStore(operators, policies[policy]), state)
-
-
-def _get(table: dict[str, Any], key: str, kind: type, default: Any) -> Any:
-    value = table.get(key, default)
-    if value is None:
-        raise ConfigError(f"{key}: required")
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
-        raise ConfigError(f"{key}: expected {kind.__name__}, got {value!r}")
-    return value
+            if isinstance(exc, TableError):
+                raise
+            raise entry.fail(f"({name}) {exc}") from None
+    return Credentials(Identity(key, cert), TrustStore(operators, UnknownPeers(policy)), state)
 
 
 def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
-    """Read the TOML file (optional) and apply ``overrides`` (dotted keys, from flags)."""
-    doc: dict[str, Any] = {}
+    """Read the TOML file (optional) and apply ``overrides`` (dotted keys, from flags); every
+    key is checked (:mod:`companion.tables`), unknown ones included."""
+    raw: dict[str, Any] = {}
     base = Path(path).parent if path is not None else Path.cwd()
     if path is not None:
-        try:
-            doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"{path}: {exc}") from None
+        raw = load_toml(path, ConfigError)
     for dotted, value in (overrides or {}).items():
         if value is None:
             continue
-        table = doc
+        table = raw
         *parents, key = dotted.split(".")
         for parent in parents:
             table = table.setdefault(parent, {})
         table[key] = value
-    link = doc.get("link", {})
-    offset = doc.get("offset", {})
-    limits = doc.get("limits", {})
-    failsafe = doc.get("failsafe", {})
-    node = _get(doc, "node", int, None) if "node" in doc else None
-    if node is None or not 1 <= node < 0xFFFF:
-        raise ConfigError("node: a node id 1..65534 is required")
-    transport = _get(link, "transport", str, "udp")
-    if transport not in ("udp", "serial"):
-        raise ConfigError("link.transport: 'udp' or 'serial'")
-    profile_name = _get(link, "profile", str, "us915-sf7")
-    try:
-        link_profile(profile_name)
-    except ValueError as exc:
-        raise ConfigError(f"link.profile: {exc}") from None
-    host, _, port = _get(link, "hub", str, "127.0.0.1:14600").rpartition(":")
-    if not host or not port.isdigit():
-        raise ConfigError("link.hub: HOST:PORT")
-    level = _get(doc, "log_level", str, "info").lower()
-    if level not in ("debug", "info", "warning", "error"):
-        raise ConfigError("log_level: debug, info, warning or error")
+    doc = Table(raw, str(path) if path is not None else "settings", ConfigError)
+    link = doc.table("link")
+    offset = doc.table("offset")
+    limits = doc.table("limits")
+    failsafe = doc.table("failsafe")
+    node = doc.optional_integer("node", low=1, high=0xFFFE)
+    transport = link.text("transport", "udp", ("udp", "serial"))
+    profile_name = link.text("profile", "us915-sf7", PROFILE_NAMES)
+    host, _, port = link.text("hub", "127.0.0.1:14600").rpartition(":")
+    if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise link.fail("expected HOST:PORT with a port 1..65535", "hub")
+    level = doc.text("log_level", "info", ("debug", "info", "warning", "error"))
     try:
         offset_settings = OffsetSettings(
-            offset_m=_get(offset, "offset_m", float, 10.0),
-            direction=_get(offset, "direction", str, "up"),
-            max_altitude_m=_get(offset, "max_altitude_m", float, 120.0),
+            offset_m=offset.number("offset_m", 10.0, low=0.0, above=True),
+            direction=offset.text("direction", "up", ("up", "down")),
+            max_altitude_m=offset.number("max_altitude_m", 120.0, low=0.0, above=True),
         )
     except ValueError as exc:
-        raise ConfigError(f"offset: {exc}") from None
+        if isinstance(exc, TableError):
+            raise
+        raise offset.fail(str(exc)) from None
     suites = {s.label: s for s in Suite}
-    suite = _get(doc, "suite", str, "compact")
-    if suite not in suites:
-        raise ConfigError(f"suite: one of {', '.join(suites)}")
-    ot_security = _get(doc, "ot_security", int, DEFAULT_SECURITY)
+    suite = doc.text("suite", "compact", list(suites))
+    ot_security = doc.integer("ot_security", DEFAULT_SECURITY)
     if ot_security not in SECURITY_LEVELS:
-        raise ConfigError(f"ot_security: one of {', '.join(map(str, SECURITY_LEVELS))}")
-    actions = {a.value: a for a in Action}
-    action = _get(failsafe, "action", str, "climb")
-    if action not in actions:
-        raise ConfigError(f"failsafe.action: one of {', '.join(actions)}")
-    numbers = {
-        "max_clock_skew_s": _get(limits, "max_clock_skew_s", float, 30.0),
-        "beacon_interval_s": _get(limits, "beacon_interval_s", float, 10.0),
-        "initiation_range_m": _get(limits, "initiation_range_m", float, 5000.0),
-        "run_timeout_s": _get(limits, "run_timeout_s", float, 900.0),
-        "lookahead_s": _get(limits, "lookahead_s", float, 60.0),
-        "grid_radius_m": _get(limits, "grid_radius_m", float, 500.0),
-        "margin_s": _get(failsafe, "margin_s", float, 10.0),
-    }
-    for key, value in numbers.items():
-        if value < 0 or (key != "lookahead_s" and value == 0):
-            raise ConfigError(f"{key}: must be positive")
-    for key in ("max_runs_per_peer", "max_runs_total"):
-        if _get(limits, key, int, 1) < 1:
-            raise ConfigError(f"limits.{key}: at least 1")
-    companion = CompanionSettings(
-        node=node,
-        autopilot_url=_get(doc, "autopilot", str, "udpin://0.0.0.0:14540"),
-        ardupilot=_get(doc, "ardupilot", bool, False),
+        raise doc.fail(f"one of {', '.join(map(str, SECURITY_LEVELS))}", "ot_security")
+    action = failsafe.text("action", "climb", [a.value for a in Action])
+
+    def positive(table: Table, key: str, default: float, zero: bool = False) -> float:
+        return table.number(key, default, low=0.0, above=not zero)
+
+    companion = functools.partial(
+        CompanionSettings,
+        autopilot_url=doc.text("autopilot", "udpin://0.0.0.0:14540"),
+        ardupilot=doc.flag("ardupilot", False),
         suite=suites[suite],
         ot_security=ot_security,
         offset=offset_settings,
-        beacon_interval_s=numbers["beacon_interval_s"],
-        initiation_range_m=numbers["initiation_range_m"],
-        grid_radius_m=numbers["grid_radius_m"],
-        max_runs_per_peer=_get(limits, "max_runs_per_peer", int, 8),
-        max_runs_total=_get(limits, "max_runs_total", int, 64),
-        max_clock_skew_s=numbers["max_clock_skew_s"],
-        run_timeout_s=numbers["run_timeout_s"],
-        lookahead_s=numbers["lookahead_s"],
-        failsafe=FailsafeSettings(actions[action], numbers["margin_s"]),
+        beacon_interval_s=positive(limits, "beacon_interval_s", 10.0),
+        initiation_range_m=positive(limits, "initiation_range_m", 5000.0),
+        grid_radius_m=positive(limits, "grid_radius_m", 500.0),
+        max_runs_per_peer=limits.integer("max_runs_per_peer", 8, low=1),
+        max_runs_total=limits.integer("max_runs_total", 64, low=1),
+        max_clock_skew_s=positive(limits, "max_clock_skew_s", 30.0),
+        run_timeout_s=positive(limits, "run_timeout_s", 900.0),
+        lookahead_s=positive(limits, "lookahead_s", 60.0, zero=True),
+        failsafe=FailsafeSettings(Action(action), positive(failsafe, "margin_s", 10.0)),
     )
-    return Config(
-        companion,
-        LinkSettings(
-            transport,
-            profile_name,
-            (host, int(port)),
-            _get(link, "serial", str, "/dev/ttyUSB0"),
-            _get(link, "baudrate", int, 115200),
-        ),
-        _credentials(doc, base, node),
-        level,
+    settings = LinkSettings(
+        transport,
+        profile_name,
+        (host, int(port)),
+        link.text("serial", "/dev/ttyUSB0"),
+        link.integer("baudrate", 115200, low=1),
     )
+    if node is None:  # unknown keys first: a misspelt "nod" says so
+        doc.known |= {"identity", "trust"}
+        doc.finish()
+        raise doc.fail("a node id 1..65534 is required (node = N, or --node)", "node")
+    credentials = _credentials(doc, base, node)
+    doc.finish()
+    return Config(companion(node=node), settings, credentials, level)

@@ -16,12 +16,14 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import sys
 import time
 from pathlib import Path
+from typing import Any
+
+from protocol import cli
 
 from .auth.certificate import SIZE as CERT_SIZE
-from .auth.certificate import Certificate, CertificateError
+from .auth.certificate import Certificate
 from .auth.keys import (
     KeyFileError,
     PublicKey,
@@ -34,7 +36,7 @@ from .auth.keys import (
 from .auth.keys import SigningKey as Key
 
 
-def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+def add_parser(sub: argparse._SubParsersAction[Any]) -> None:
     keys = sub.add_parser("keys", help="drone and operator keys, certificates")
     action = keys.add_subparsers(dest="action", required=True)
     init = action.add_parser("init", help="a new Ed25519 key: FILE (mode 0600) and its .pub")
@@ -43,12 +45,19 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     certify = action.add_parser("certify", help="sign a drone's key with an operator key")
     certify.add_argument("--operator-key", required=True, help="the operator's private key")
     certify.add_argument("--drone", required=True, help="the drone's .pub (or .key) file")
-    certify.add_argument("--node", type=int, required=True, help="the drone's node id (0..65534)")
-    certify.add_argument("--days", type=float, default=365.0, help="validity (default: 365)")
-    certify.add_argument("--out", required=True, help="certificate file to write")
+    certify.add_argument(
+        "--node", type=cli.integer(1, 0xFFFE), required=True, help="the drone's node id"
+    )
+    certify.add_argument(
+        "--days", type=cli.number(0, 36_500, above=True), default=365.0, help="validity in days"
+    )
+    certify.add_argument(
+        "--out", type=cli.output_file(), required=True, help="certificate file to write"
+    )
     show = action.add_parser("show", help="what key and certificate files hold")
-    show.add_argument("files", nargs="+")
+    show.add_argument("files", nargs="+", type=cli.existing_file, help="key or certificate files")
     show.add_argument("--operator", help="check certificates against this operator .pub file")
+    keys.set_defaults(func=run)
 
 
 def _public_of(path: Path) -> PublicKey:
@@ -86,43 +95,32 @@ def _describe(path: Path, operator: PublicKey | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Expected failures are one line on stderr and exit code 2."""
-    try:
-        if args.action == "init":
-            path = Path(args.file)
-            public = path.with_suffix(".pub")
-            if path.suffix == ".pub":
-                raise ValueError(f"{path}: name the private key file, not .pub")
-            for existing in (path, public):
-                if existing.exists() and not args.force:
-                    raise ValueError(f"{existing} exists (--force to overwrite)")
-            key = Key.generate()
-            write_private_key(path, key)
-            write_public_key(public, key.public)
-            print(f"{path}: new key, fingerprint {key.fingerprint.hex()} (public: {public})")
-            return 0
-        if args.action == "certify":
-            operator = read_private_key(Path(args.operator_key))
-            drone = _public_of(Path(args.drone))
-            if not args.days > 0:
-                raise ValueError("--days must be positive")
-            start = int(time.time()) - 300  # five minutes of clock error between drones
-            cert = Certificate.issue(
-                operator, drone, args.node, start, start + int(args.days * 86400)
-            )
-            write_atomic(Path(args.out), cert.encode())
-            print(
-                f"{args.out}: node {args.node}, drone {cert.fingerprint.hex()} certified by "
-                f"{operator.fingerprint.hex()} until {_when(cert.not_after)}"
-            )
-            return 0
-        operator_key = _public_of(Path(args.operator)) if args.operator else None
-        for name in args.files:
-            print(_describe(Path(name), operator_key))
+    """One action; failures raise (one line and exit 2 by :func:`protocol.cli.run`)."""
+    if args.action == "init":
+        path = Path(args.file)
+        public = path.with_suffix(".pub")
+        if path.suffix == ".pub":
+            raise cli.InputError(f"{path}: name the private key file, not .pub")
+        for existing in (path, public):
+            if existing.exists() and not args.force:
+                raise cli.InputError(f"{existing} exists (--force to overwrite)")
+        key = Key.generate()
+        write_private_key(path, key)
+        write_public_key(public, key.public)
+        print(f"{path}: new key, fingerprint {key.fingerprint.hex()} (public: {public})")
         return 0
-    except (KeyFileError, CertificateError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"error: {exc.filename}: {exc.strerror}", file=sys.stderr)
-        return 2
+    if args.action == "certify":
+        operator = read_private_key(Path(args.operator_key))
+        drone = _public_of(Path(args.drone))
+        start = int(time.time()) - 300  # five minutes of clock error between drones
+        cert = Certificate.issue(operator, drone, args.node, start, start + int(args.days * 86400))
+        write_atomic(Path(args.out), cert.encode())
+        print(
+            f"{args.out}: node {args.node}, drone {cert.fingerprint.hex()} certified by "
+            f"{operator.fingerprint.hex()} until {_when(cert.not_after)}"
+        )
+        return 0
+    operator_key = _public_of(Path(args.operator)) if args.operator else None
+    for name in args.files:
+        print(_describe(Path(name), operator_key))
+    return 0

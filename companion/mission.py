@@ -34,6 +34,8 @@ FRAMES_AMSL = frozenset({0, 5})  # GLOBAL, GLOBAL_INT
 FRAMES_RELATIVE = frozenset({3, 6})  # GLOBAL_RELATIVE_ALT(_INT)
 FRAMES_TERRAIN = frozenset({10, 11})  # GLOBAL_TERRAIN_ALT(_INT)
 FRAMES_GLOBAL = FRAMES_AMSL | FRAMES_RELATIVE | FRAMES_TERRAIN
+# No drone flies 20 km above or below its home or sea level: a larger altitude is a typo.
+MAX_ALTITUDE_M = 20_000.0
 KNOWN_FRAMES = FRAMES_GLOBAL | {1, 2, 4, 7, 8, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21}
 MISSION_TYPES = {0: "mission", 1: "fence", 2: "rally"}
 
@@ -68,9 +70,10 @@ class MissionItem:
             and not (self.x == 0 and self.y == 0)
         )
 
-    def check(self) -> None:
-        """Bounds and sizes of every field (items arrive from files and from the vehicle)."""
-        where = f"item {self.seq}"
+    def check(self, where: str | None = None) -> None:
+        """Bounds and sizes of every field (items arrive from files and from the vehicle);
+        errors start with ``where`` (default: the item's number)."""
+        where = where or f"item {self.seq}"
         if not 0 <= self.seq <= 0xFFFF or not 0 <= self.command <= 0xFFFF:
             raise MissionError(f"{where}: seq/command out of range")
         if self.frame not in KNOWN_FRAMES:
@@ -87,6 +90,11 @@ class MissionItem:
             raise MissionError(f"{where}: latitude/longitude out of range")
         if not math.isfinite(self.z):
             raise MissionError(f"{where}: altitude is not a number")
+        if self.frame in FRAMES_GLOBAL and abs(self.z) > MAX_ALTITUDE_M:
+            raise MissionError(
+                f"{where}: altitude {self.z:g} m is out of range (at most {MAX_ALTITUDE_M:g} m "
+                "from home or sea level)"
+            )
         for name in ("param1", "param2", "param3"):
             if math.isinf(getattr(self, name)):
                 raise MissionError(f"{where}: {name} is infinite")

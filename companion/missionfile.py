@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from protocol import cli
 
 from .flightpath import DO_JUMP
 from .mission import (
@@ -46,20 +46,6 @@ def _read(path: str | Path) -> str:
         raise MissionError(f"{p}: {exc}") from None
 
 
-def _write_atomic(path: str | Path, text: str) -> None:
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _xy(frame: int, lat: float, lon: float) -> tuple[int, int]:
     if frame in FRAMES_GLOBAL:
         return round(lat * 1e7), round(lon * 1e7)
@@ -75,10 +61,7 @@ def _num(value: Any, where: str) -> float:
 
 
 def _checked(item: MissionItem, where: str) -> MissionItem:
-    try:
-        item.check()
-    except MissionError as exc:
-        raise MissionError(f"{where}: {exc}") from None
+    item.check(where)
     return item
 
 
@@ -311,12 +294,20 @@ def _landing_pattern(raw: dict[str, Any], where: str) -> list[MissionItem]:
     return [_checked(it, f"{where} ({kind})") for it in out]
 
 
+def _no_constant(token: str) -> float:
+    """JSON has no NaN or Infinity (Python's reader takes them): a file with one was not
+    written by QGroundControl, which writes null for a missing value."""
+    raise MissionError(f"{token} is not a JSON number (a missing value is null)")
+
+
 def parse_plan_file(text: str, name: str = "plan") -> MissionFile:
     """A QGroundControl plan: its items (complex items expanded) and planned home."""
     try:
-        doc = json.loads(text)
+        doc = json.loads(text, parse_constant=_no_constant)
     except (json.JSONDecodeError, RecursionError) as exc:
         raise MissionError(f"{name}: not JSON ({exc})") from None
+    except MissionError as exc:
+        raise MissionError(f"{name}: {exc}") from None
     mission = doc.get("mission") if isinstance(doc, dict) else None
     if not isinstance(mission, dict) or not isinstance(mission.get("items"), list):
         raise MissionError(f"{name}: no mission.items list")
@@ -421,7 +412,7 @@ def format_plan(items: Sequence[MissionItem], home: Sequence[float]) -> str:
 
 
 def write_plan(path: str | Path, items: Sequence[MissionItem], home: Sequence[float]) -> None:
-    _write_atomic(path, format_plan(items, home))
+    cli.write_atomic(path, format_plan(items, home))
 
 
 # ---------------------------------------------------------------------------- QGC WPL 110
@@ -453,8 +444,13 @@ def parse_wpl_file(text: str, name: str = "mission") -> MissionFile:
         if seq <= last_seq:
             raise MissionError(f"{where}: sequence number {seq} after {last_seq}")
         last_seq = seq
-        if frame in FRAMES_GLOBAL and command in POSITIONAL_NAV and not math.isfinite(p[6]):
-            raise MissionError(f"{where}: altitude is not a number")
+        if any(math.isinf(v) for v in p):
+            raise MissionError(f"{where}: a parameter is infinite")
+        if frame in FRAMES_GLOBAL and command in POSITIONAL_NAV:
+            if not math.isfinite(p[6]):
+                raise MissionError(f"{where}: altitude is not a number")
+            if not all(map(math.isfinite, p[4:6])):  # "here" is 0, 0 in a WPL file
+                raise MissionError(f"{where}: latitude/longitude is not a number")
         x, y = _xy(frame, p[4], p[5]) if all(map(math.isfinite, p[4:6])) else (0, 0)
         item = MissionItem(
             len(items),
@@ -518,7 +514,7 @@ def format_wpl(items: Sequence[MissionItem], home: Sequence[float]) -> str:
 
 
 def write_wpl(path: str | Path, items: Sequence[MissionItem], home: Sequence[float]) -> None:
-    _write_atomic(path, format_wpl(items, home))
+    cli.write_atomic(path, format_wpl(items, home))
 
 
 def read_mission_file(path: str | Path) -> MissionFile:

@@ -34,7 +34,6 @@ import socket
 import sys
 import tempfile
 import time
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -49,6 +48,7 @@ from .beacon import UNAUTHENTICATED_SIZE
 from .failsafe import Action, FailsafeSettings
 from .flightpath import FlightPath, flight_path
 from .link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
+from .link.airtime import PROFILES
 from .mission import (
     MissionError,
     MissionItem,
@@ -62,6 +62,7 @@ from .replay_fleet import make_fleet
 from .replay_vehicles import MockVehicle, Px4SitlVehicle, ReplayVehicle
 from .runtime import Companion, CompanionSettings
 from .sim_px4 import Px4Build
+from .tables import Table, TableError, load_toml
 
 log = logging.getLogger(__name__)
 # SIH lock-step speed factor for two PX4 vehicles, their companions and the protocol on 2
@@ -93,7 +94,11 @@ class Replay:
     tracks: Tracks
 
 
-class ScenarioError(ValueError):
+MAX_TIME_SCALE = 10_000.0  # simulated seconds per real second: lossy_sf9 flies at 2000
+MAX_LOSS = 0.9  # more loss than this and no run ends: a scenario for nothing
+
+
+class ScenarioError(TableError):
     """The scenario file is invalid."""
 
 
@@ -141,101 +146,76 @@ class Scenario:
 
 
 def load_scenario(path: str | Path) -> Scenario:
+    """Read and check a scenario file whole (:mod:`companion.tables`): every number finite
+    and in range, every mission readable, no unknown key."""
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{path}: {exc}") from None
-
-    def number(table: dict[str, Any], key: str, default: float | None = None) -> float:
-        value = table.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, int | float) or value < 0:
-            raise ScenarioError(f"{path}: {key} must be a non-negative number")
-        return float(value)
-
-    time_scale = number(doc, "time_scale", 20.0)
-    time_limit_s = number(doc, "time_limit_s", 900.0)
-    if time_scale <= 0:
-        raise ScenarioError(f"{path}: time_scale must be positive")
-    link = doc.get("link", {})
-    if not isinstance(link, dict):
-        raise ScenarioError(f"{path}: [link] must be a table")
-    try:
-        profile(str(link.get("profile", "us915-sf7")))
-    except ValueError as exc:
-        raise ScenarioError(f"{path}: {exc}") from None
-    raw_drones = doc.get("drone")
-    if not isinstance(raw_drones, list) or len(raw_drones) < 2:
-        raise ScenarioError(f"{path}: at least two [[drone]] tables are needed")
+    doc = Table(load_toml(path, ScenarioError), str(path), ScenarioError)
+    time_scale = doc.number("time_scale", 20.0, low=0.0, above=True)
+    if time_scale > MAX_TIME_SCALE:
+        raise doc.fail(f"{time_scale:g} is out of range (at most {MAX_TIME_SCALE:g})", "time_scale")
+    time_limit_s = doc.number("time_limit_s", 900.0, low=0.0, above=True)
+    link = doc.table("link")
+    link_profile = link.text("profile", "us915-sf7", list(PROFILES))
+    loss = link.number("loss", 0.0, low=0.0, high=MAX_LOSS)
+    seed = link.optional_integer("seed", low=0)
+    raw_drones = doc.tables("drone", "drone")
+    if len(raw_drones) < 2:
+        raise doc.fail("at least two [[drone]] tables are needed")
     drones, ids = [], set()
-    for number_, raw in enumerate(raw_drones, start=1):
-        where = f"{path}: drone {number_}"
-        ident = raw.get("id")
-        if not isinstance(ident, int) or not 1 <= ident < 0xFFFF or ident in ids:
-            raise ScenarioError(f"{where}: id must be a unique integer 1..65534")
+    for raw in raw_drones:
+        ident = raw.integer("id", low=1, high=0xFFFE)
+        if ident in ids:
+            raise raw.fail(f"{ident} is taken by another drone", "id")
         ids.add(ident)
-        kind = raw.get("autopilot", "px4")
-        if kind not in ("px4", "ardupilot"):
-            raise ScenarioError(f"{where}: autopilot must be 'px4' or 'ardupilot'")
-        mission_file = raw.get("mission")
-        if not isinstance(mission_file, str):
-            raise ScenarioError(f"{where}: mission must be a file name")
+        kind = raw.text("autopilot", "px4", ("px4", "ardupilot"))
+        mission_file = raw.text("mission")
         try:
-            plan = read_mission_file(path.parent / mission_file)
+            plan = read_mission_file(path.parent / mission_file)  # errors name the file
+        except MissionError as exc:
+            raise raw.fail(str(exc)) from None
+        try:
             if plan.home is None:
                 raise MissionError("the mission file gives no home")
             items = plan.for_autopilot(ardupilot=kind == "ardupilot")
             flight_path(items, plan.home_degE7, ardupilot=kind == "ardupilot")  # jumps valid
         except MissionError as exc:
-            raise ScenarioError(f"{where}: {exc}") from None
-        home3 = plan.home
-        hold = raw.get("hold_for_comparisons", True)
-        if not isinstance(hold, bool):
-            raise ScenarioError(f"{where}: hold_for_comparisons must be true or false")
-        operator = raw.get("operator", "fleet")
-        if not isinstance(operator, str) or not operator:
-            raise ScenarioError(f"{where}: operator must be a name")
+            raise raw.fail(f"{mission_file}: {exc}") from None
         drones.append(
             DroneSpec(
                 ident,
                 items,
-                home3,
-                number(raw, "takeoff_delay_s", 0.0),
+                plan.home,
+                raw.number("takeoff_delay_s", 0.0, low=0.0),
                 kind == "ardupilot",
-                hold_for_comparisons=hold,
-                operator=operator,
+                hold_for_comparisons=raw.flag("hold_for_comparisons", True),
+                operator=raw.text("operator", "fleet"),
             )
         )
-    failsafe = doc.get("failsafe", "climb")
-    if failsafe not in {a.value for a in Action}:
-        raise ScenarioError(f"{path}: failsafe must be one of climb, hold, off")
-    untrusted = doc.get("untrusted_operators", [])
-    if not isinstance(untrusted, list) or not all(isinstance(u, str) for u in untrusted):
-        raise ScenarioError(f"{path}: untrusted_operators must be a list of operator names")
+    failsafe = doc.text("failsafe", "climb", [a.value for a in Action])
+    untrusted = doc.strings("untrusted_operators")
     if not {d.operator for d in drones} - set(untrusted):
-        raise ScenarioError(f"{path}: every operator is untrusted")
-    policies = {p.value: p for p in UnknownPeers}
-    policy = doc.get("unknown_peers", "ignore")
-    if policy not in policies:
-        raise ScenarioError(f"{path}: unknown_peers must be one of {', '.join(policies)}")
-    return Scenario(
+        raise doc.fail("every operator is untrusted", "untrusted_operators")
+    policy = doc.text("unknown_peers", "ignore", [p.value for p in UnknownPeers])
+    scenario = Scenario(
         name=path.stem,
         time_scale=time_scale,
         time_limit_s=time_limit_s,
-        link_profile=str(link.get("profile", "us915-sf7")),
-        loss=number(link, "loss", 0.0),
-        seed=link.get("seed") if isinstance(link.get("seed"), int) else None,
+        link_profile=link_profile,
+        loss=loss,
+        seed=seed,
         drones=drones,
-        offset_m=number(doc, "offset_m", 10.0),
-        cruise_m_s=number(doc, "cruise_m_s", 10.0),
-        beacon_interval_s=number(doc, "beacon_interval_s", 5.0),
-        grid_radius_m=number(doc, "grid_radius_m", 500.0),
-        grid_resolution_mm=int(number(doc, "grid_resolution_mm", 500)) or 500,
-        lookahead_s=number(doc, "lookahead_s", 60.0),
+        offset_m=doc.number("offset_m", 10.0, low=0.0, above=True),
+        cruise_m_s=doc.number("cruise_m_s", 10.0, low=0.0, above=True),
+        beacon_interval_s=doc.number("beacon_interval_s", 5.0, low=0.0, above=True),
+        grid_radius_m=doc.number("grid_radius_m", 500.0, low=0.0, above=True),
+        grid_resolution_mm=doc.integer("grid_resolution_mm", 500, low=1),
+        lookahead_s=doc.number("lookahead_s", 60.0, low=0.0),
         failsafe=Action(failsafe),
         untrusted_operators=frozenset(untrusted),
-        unknown_peers=policies[policy],
+        unknown_peers=UnknownPeers(policy),
     )
+    doc.finish()
+    return scenario
 
 
 def free_udp_port() -> int:
@@ -485,7 +465,7 @@ def _report(
         flagged = sorted(c.flagged)
         false_alarms += sum(1 for k in flagged if k < len(plain) and not plain[k])
         precautionary = [
-            {"t": round(e.t, 1), **e.detail} for e in c.events if e.kind == "precautionary"
+            {"t_s": round(e.t, 1), **e.detail} for e in c.events if e.kind == "precautionary"
         ]
         precautions += len(precautionary)
         stats = c.endpoint.stats
@@ -503,12 +483,13 @@ def _report(
                 "flagged_segments": flagged,
                 "levels": {str(k): v for k, v in sorted(c.levels.items())},
                 "edits": [e.detail for e in c.events if e.kind == "uploaded"],
-                "verified": any(e.kind == "uploaded" for e in c.events) or None,
-                "runs": [e.detail | {"t": round(e.t, 1)} for e in c.events if e.kind == "result"],
+                "edit": _edit_status(c),
+                "runs_unfinished": _unfinished(c),
+                "runs": [e.detail | {"t_s": round(e.t, 1)} for e in c.events if e.kind == "result"],
                 "failures": [e.detail | {"kind": e.kind} for e in c.events if "failed" in e.kind],
                 "precautionary": precautionary,
                 "timeline": [
-                    {"t": round(e.t, 1), "kind": e.kind}
+                    {"t_s": round(e.t, 1), "kind": e.kind}
                     | {k: v for k, v in e.detail.items() if k in ("peer", "phase", "why")}
                     for e in c.events
                     if e.kind in TIMELINE
@@ -526,7 +507,7 @@ def _report(
                 },
                 "untrusted_heard": [e.detail["drone"] for e in c.events if e.kind == "untrusted"],
                 "beacons_rejected": dict(c.rejected),
-                "max_altitude_m": round(
+                "max_altitude_m_amsl": round(
                     max((alt for *_, alt in mocks[d.id].trajectory), default=0.0), 2
                 ),
                 "vehicle_holds": _holds(held[d.id], d.mission, c.mission, d.ardupilot),
@@ -558,12 +539,12 @@ def _report(
                     "acted": acted,
                     "resolved": ok,
                     "closest_approach_m": round(with_companion, 2),
-                    "closest_approach_t": round(when, 1),
+                    "closest_approach_t_s": round(when, 1),
                     "closest_approach_baseline_m": round(without, 2),
                     "resolved_tolerance_m": tolerance,
                 }
             )
-    return {
+    report: dict[str, Any] = {
         "scenario": scenario.name,
         "link": {"profile": scenario.link_profile, "loss": scenario.loss, "seed": scenario.seed},
         "time_scale": time_scale,
@@ -577,6 +558,59 @@ def _report(
         "precautionary_actions": precautions,
         "false_alarms": false_alarms,
     }
+    report["problems"] = problems(report)
+    report["ok"] = not report["problems"]
+    return report
+
+
+# Companion events after which the drone did not fly what it should have: a replay with one
+# has failed, whatever the separations say.
+FAILED_EVENTS = frozenset(
+    {"plan_failed", "upload_failed", "hold_failed", "resume_failed", "mission_invalid"}
+)
+
+
+def _edit_status(c: Companion) -> str:
+    """What became of the drone's mission: "verified" (an edit uploaded and read back the
+    same), "failed" (an edit was needed and did not land) or "not needed"."""
+    if any(e.kind in ("plan_failed", "upload_failed") for e in c.events):
+        return "failed"
+    return "verified" if any(e.kind == "uploaded" for e in c.events) else "not needed"
+
+
+def _unfinished(c: Companion) -> int:
+    """Runs as Alice that started and neither gave a result nor failed (cut by the end)."""
+    open_runs = 0
+    for e in c.events:
+        if e.kind == "run_started":
+            open_runs += 1
+        elif e.kind in ("result", "run_failed", "yielded", "setup_renewed") and open_runs:
+            open_runs -= 1
+    return open_runs
+
+
+def problems(report: dict[str, Any]) -> list[str]:
+    """Everything that makes a replay a failure, one line each (empty: it succeeded)."""
+    out = []
+    if not report["finished"]:
+        out.append("the time limit ended the replay before every mission was flown")
+    for d in report["drones"]:
+        for failure in d["failures"]:
+            if failure["kind"] in FAILED_EVENTS:
+                why = failure.get("error") or failure.get("why") or ""
+                out.append(f"drone {d['id']}: {failure['kind'].replace('_', ' ')}: {why}")
+        if d["runs_unfinished"]:
+            out.append(f"drone {d['id']}: {d['runs_unfinished']} run(s) never finished")
+    for p in report["pairs"]:
+        if p["conflict"] and p["trusted"] and not p["resolved"]:
+            a, b = p["drones"]
+            out.append(
+                f"drones {a}-{b}: conflict NOT resolved (closest approach "
+                f"{p['closest_approach_m']:.1f} m, offset {report['offset_m']:g} m)"
+            )
+    if report["false_alarms"]:
+        out.append(f"{report['false_alarms']} segment(s) flagged that do not cross (false alarm)")
+    return out
 
 
 def _holds(
@@ -598,6 +632,7 @@ def _holds(
 
 
 def format_report(report: dict[str, Any]) -> str:
+    """The replay as text: what each drone did, each pair's separation, and every problem."""
     lines = [
         f"Replay {report['scenario']} over {report['link']['profile']} "
         f"(loss {report['link']['loss']:.0%}), time scale {report['time_scale']}x"
@@ -605,17 +640,22 @@ def format_report(report: dict[str, Any]) -> str:
         + ":"
     ]
     for d in report["drones"]:
-        if d["edits"]:
+        if d["edit"] == "verified":
             levels = ", ".join(
                 f"{k} (+{v * report['offset_m']:.0f} m)" for k, v in d["levels"].items()
             )
             what = f"flies segments {levels or 'none'} higher (upload verified)"
+        elif d["edit"] == "failed":
+            what = "needed an edit that FAILED, flies its original altitudes"
         else:
-            what = "kept its altitude"
+            what = "kept its altitude (no edit needed)"
         if d["precautionary"]:
             what += f"; {len(d['precautionary'])} precautionary action(s)"
         if d["failures"]:
-            what += f"; {len(d['failures'])} failure(s): {d['failures'][0]['kind']}"
+            kinds = sorted({f["kind"] for f in d["failures"]})
+            what += f"; {len(d['failures'])} failure(s): {', '.join(kinds)}"
+        if d["runs_unfinished"]:
+            what += f"; {d['runs_unfinished']} run(s) never finished"
         if d["untrusted_heard"]:
             what += f"; ignored {len(d['untrusted_heard'])} untrusted drone(s)"
         auth = d["auth"]
@@ -639,7 +679,7 @@ def format_report(report: dict[str, Any]) -> str:
         lines.append(
             f"  drones {a}-{b}: closest approach {p['closest_approach_baseline_m']:.1f} m "
             f"without the companion, {p['closest_approach_m']:.1f} m with it "
-            f"(t = {p['closest_approach_t']:.0f} s): {verdict}"
+            f"(t = {p['closest_approach_t_s']:.0f} s): {verdict}"
         )
     lines.append(
         f"  conflicts resolved {report['conflicts_resolved']}/{report['conflicts']}, "
@@ -651,6 +691,11 @@ def format_report(report: dict[str, Any]) -> str:
             else ""
         )
     )
+    if report["problems"]:
+        lines.append(f"FAILED ({len(report['problems'])} problem(s)):")
+        lines.extend(f"  - {line}" for line in report["problems"])
+    else:
+        lines.append("OK: every mission flown, every conflict resolved by a verified action")
     return "\n".join(lines)
 
 
@@ -662,17 +707,22 @@ MARKERS = {
 }
 
 
+PLOT_FORMATS = ("png", "pdf", "svg")
+
+
 def plot_report(replay: Replay, out: str | Path) -> None:
-    """PNG: ground tracks (planned, flown, direction, closest approaches), the distance of
-    every pair over time with the runs' moments marked, and altitudes around the encounters."""
+    """PNG, PDF or SVG (by ``out``'s ending): ground tracks (planned, flown, direction,
+    closest approaches), the distance of every pair over time with the runs' moments marked,
+    and altitudes around the encounters."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     out = Path(out)
-    if out.suffix.lower() != ".png":
-        raise ScenarioError(f"--plot writes a PNG: {out} does not end in .png")
+    kind = out.suffix.lower().lstrip(".")
+    if kind not in PLOT_FORMATS:
+        raise ScenarioError(f"{out}: a plot is {', '.join(PLOT_FORMATS)} (by the file's ending)")
     report, tracks = replay.report, replay.tracks
     ref = next(iter(tracks.paths.values()))[0]
     ref_deg = (ref[0] / 1e7, ref[1] / 1e7)
@@ -735,10 +785,12 @@ def plot_report(replay: Replay, out: str | Path) -> None:
             for event in drone["timeline"]:
                 if event["kind"] in MARKERS and event.get("peer", other) == other:
                     marker, _ = MARKERS[event["kind"]]
-                    gap.axvline(event["t"], color=colour[drone["id"]], lw=0.4, alpha=0.5)
-                    gap.plot(event["t"], 0, marker, color=colour[drone["id"]], ms=8, clip_on=False)
-                    moments.append(event["t"])
-        moments.append(pair["closest_approach_t"])
+                    gap.axvline(event["t_s"], color=colour[drone["id"]], lw=0.4, alpha=0.5)
+                    gap.plot(
+                        event["t_s"], 0, marker, color=colour[drone["id"]], ms=8, clip_on=False
+                    )
+                    moments.append(event["t_s"])
+        moments.append(pair["closest_approach_t_s"])
     for marker, label in MARKERS.values():
         gap.plot([], [], marker, color="grey", label=label)
     gap.axhline(report["offset_m"], color="red", lw=0.8, ls="--", label="offset")
@@ -770,10 +822,13 @@ def plot_report(replay: Replay, out: str | Path) -> None:
     )
     height.legend(loc="best", fontsize=7)
     fig.tight_layout()
-    tmp = out.with_name(out.name + ".tmp.png")
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    tmp.replace(out)
+    tmp = out.with_name(f".{out.name}.tmp")
+    try:
+        fig.savefig(tmp, dpi=100, format=kind)
+        tmp.replace(out)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
 
 
 def _separation(a: Track, b: Track) -> list[tuple[float, float]]:

@@ -21,11 +21,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import itertools
 import logging
 import math
 import random
 import secrets
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,6 +39,7 @@ from protocol.ot.setup import DEFAULT_SECURITY, ChooserSetup, HolderSetup
 from protocol.suite_compact import message_sizes
 from protocol.wire import Hello, Suite
 
+from . import logs
 from .auth.beacon_keys import BeaconKeys
 from .auth.certificate import Certificate
 from .auth.session import (
@@ -72,6 +75,7 @@ from .mission import MissionError, MissionItem, point_as_segment
 from .neighbours import NO_CERTIFICATE, Heard, Hearing, Neighbour, Neighbours
 from .peers import FRESH_S, Peer, distance_m, near_cut, time_to_meet
 from .planner import OffsetSettings, PlannerError, fixed_segments, plan_offsets
+from .progress import RunProgress
 from .radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
 from .state import OWN, StateStore
 
@@ -88,6 +92,21 @@ GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet
 SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one),
 SIGNED_EVERY = 30  # and at most every 30th beacon (a duty cycle stretches beacons to minutes)
 ASKED_AGAIN = 0.5  # asked for, a certificate or signed beacon at most every half interval
+# events that mean something went wrong or a drone acted without a result: logged as warnings
+WARNING_EVENTS = frozenset(
+    {
+        "answer_failed",
+        "hold_failed",
+        "intruder",
+        "mission_invalid",
+        "plan_failed",
+        "precautionary",
+        "resume_failed",
+        "run_failed",
+        "upload_failed",
+    }
+)
+AUTOPILOT_SILENT_S = 5.0  # no position from the autopilot this long (real s): a warning
 ALERT_EVERY_S = 60.0  # an untrusted drone is reported at most this often (policy "alert")
 
 
@@ -221,6 +240,7 @@ class Companion:
         self.speed_m_s = 0.0
         self.current_item = 0
         self.has_flown = False  # airborne at least once since the companion started
+        self._heard_autopilot = time.monotonic()  # the last position (real seconds)
         self._tasks: list[asyncio.Task[None]] = []
         self._children: set[asyncio.Task[None]] = set()
         self._busy = asyncio.Lock()
@@ -240,9 +260,13 @@ class Companion:
     # ------------------------------------------------------------------ lifecycle
 
     def record(self, kind: str, **detail: Any) -> None:
-        """An event at link seconds since :attr:`epoch` (the start, or the replay's zero)."""
-        self.events.append(Event(self.clock.now() - self.epoch, kind, detail))
-        log.info("node %d %s %s", self.settings.node, kind, detail)
+        """An event at link seconds since :attr:`epoch` (the start, or the replay's zero),
+        logged as ``key=value`` text and as a JSON line (:mod:`companion.logs`)."""
+        t = self.clock.now() - self.epoch
+        self.events.append(Event(t, kind, detail))
+        level = logging.WARNING if kind in WARNING_EVENTS else logging.INFO
+        text = f"node {self.settings.node}: {kind.replace('_', ' ')}"
+        logs.event(log, level, kind, text, t_s=round(t, 1), **detail)
 
     async def start(self) -> None:
         self.epoch = self.clock.now()
@@ -265,6 +289,7 @@ class Companion:
         self._tasks = [
             asyncio.create_task(self._telemetry(), name="telemetry"),
             asyncio.create_task(self._progress(), name="progress"),
+            asyncio.create_task(self._autopilot_watch(), name="autopilot watch"),
             asyncio.create_task(self._certificates(), name="certificates"),
             asyncio.create_task(self._beacons(), name="beacons"),
             asyncio.create_task(self._listen(), name="listen"),
@@ -321,6 +346,7 @@ class Companion:
             except Exception as exc:  # any MAVSDK error: keep the default rate
                 log.info("position rate unchanged: %s", exc)
             async for p in telemetry.subscribe_position():
+                self._heard_autopilot = time.monotonic()
                 self.position = (
                     round(p.latitude_deg * 1e7),
                     round(p.longitude_deg * 1e7),
@@ -339,6 +365,26 @@ class Companion:
                     last = (now, self.position[:2])
         finally:
             telemetry.destroy()
+
+    async def _autopilot_watch(self) -> None:
+        """Warn when the autopilot's position stops coming (real seconds: MAVLink streams run
+        in real time whatever the link's clock), and again when it is back."""
+        silent = False
+        while True:
+            await asyncio.sleep(1.0)
+            gap = time.monotonic() - self._heard_autopilot
+            if gap >= AUTOPILOT_SILENT_S and not silent:
+                silent = True
+                logs.event(
+                    log,
+                    logging.WARNING,
+                    "autopilot_silent",
+                    f"node {self.settings.node}: no position from the autopilot for {gap:.0f} s",
+                    url=self.settings.autopilot_url,
+                )
+            elif gap < AUTOPILOT_SILENT_S and silent:
+                silent = False
+                log.info("node %d: the autopilot's position is back", self.settings.node)
 
     async def _progress(self) -> None:
         async for progress in self.autopilot.mission_raw.subscribe_mission_progress():
@@ -822,18 +868,27 @@ class Companion:
                 route = Route(self.settings.node, peer.node, session)
                 return Initiator(self.identity, cert, route, self.clock.wall())
 
+            progress = RunProgress(
+                self.settings.node,
+                self.endpoint,
+                peer.node,
+                "alice",
+                expected_bytes=functools.partial(self._run_bytes, alice, grid, fresh=setup is None),
+                ends_at=lambda: None if self._running is None else self._running[1],
+            )
             try:
-                report = await run_alice(
-                    self.endpoint,
-                    peer.node,
-                    alice,
-                    secure=secure,
-                    check_keys=lambda boot, public: (
-                        neighbour.beacon_key is not None
-                        and keys_hash(boot, neighbour.beacon_key, public) == neighbour.keys_hash
-                    ),
-                    timeout=self.settings.run_timeout_s,
-                )
+                with progress:
+                    report = await run_alice(
+                        self.endpoint,
+                        peer.node,
+                        alice,
+                        secure=secure,
+                        check_keys=lambda boot, public: (
+                            neighbour.beacon_key is not None
+                            and keys_hash(boot, neighbour.beacon_key, public) == neighbour.keys_hash
+                        ),
+                        timeout=self.settings.run_timeout_s,
+                    )
             except PeerRefused as exc:
                 if exc.code is Refusal.UNKNOWN_SETUP and attempt == 0:
                     self.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
@@ -884,6 +939,17 @@ class Companion:
             await self._release(peer)
         await self._replan(f"result of the {phase} run with {peer.node}")
         return True
+
+    def _run_bytes(self, alice: Alice, grid: GridSpec, *, fresh: bool) -> int | None:
+        """Payload bytes the run is expected to move both ways (Bob's size guessed as
+        Alice's until his first reply; None for the paper suite, which has no size model)."""
+        if self.settings.suite is not Suite.COMPACT:
+            return None
+        n = alice.m if alice.n is None else alice.n
+        sizes = message_sizes(
+            alice.m, n, grid, fresh_setup=fresh, ot_security=self.settings.ot_security
+        )
+        return sum(size for _, size in sizes)
 
     def _seconds(
         self, m: int, grid: GridSpec, *, fresh: bool, n: int | None = None, skip: int = 0
@@ -1106,16 +1172,17 @@ class Companion:
                 self._sessions += 1
                 bob = Bob(self._bob_path, keys=self.bob_keys, setups=setups, geographic=True)
                 try:
-                    report = await serve_bob(
-                        self.endpoint,
-                        peer,
-                        session,
-                        bob,
-                        secure=responder,
-                        boot=self.boot,
-                        timeout=self.settings.run_timeout_s,
-                        first=responder.init.hello,
-                    )
+                    with RunProgress(self.settings.node, self.endpoint, peer, "bob"):
+                        report = await serve_bob(
+                            self.endpoint,
+                            peer,
+                            session,
+                            bob,
+                            secure=responder,
+                            boot=self.boot,
+                            timeout=self.settings.run_timeout_s,
+                            first=responder.init.hello,
+                        )
                 finally:
                     self._sessions -= 1
                     if bob.state is not State.DONE:  # no last message: Alice learnt nothing

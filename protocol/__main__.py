@@ -1,4 +1,6 @@
-"""Command line: ``python -m protocol {demo, compare, bench crypto|paper|scaling}``."""
+"""Command line of the cryptographic core (``drone-deconflict-protocol`` or
+``python -m protocol``): demo, compare, bench crypto|paper|scaling|design.  Errors are one
+line and exit 2 (:mod:`protocol.cli`)."""
 
 from __future__ import annotations
 
@@ -7,7 +9,13 @@ import json
 import sys
 from pathlib import Path
 
-from .errors import ProtocolError
+from . import cli
+
+DESCRIPTION = (
+    "The encrypted path-intersection protocol of private drone deconfliction: Alice learns "
+    "which of her segments cross Bob's path, Bob learns nothing. Demo, comparison of two "
+    "path files, and benchmarks."
+)
 
 
 def _demo(_args: argparse.Namespace) -> int:
@@ -22,18 +30,6 @@ def _compare(args: argparse.Namespace) -> int:
     result = compare(args.alice, args.bob, args.suite, range_=args.range, progress=not args.json)
     print(json.dumps(result, indent=2) if args.json else format_compare(result))
     return 0 if all(c["hits"] == c["plain_hits"] for c in result["cases"]) else 1
-
-
-def _sizes(text: str | None, *, default: tuple[int, ...]) -> tuple[int, ...]:
-    if text is None:
-        return default
-    try:
-        sizes = tuple(int(part) for part in text.split(","))
-    except ValueError:
-        raise ProtocolError(f"--sizes must be comma-separated integers, got {text!r}") from None
-    if not sizes or any(not 1 <= s <= 256 for s in sizes):
-        raise ProtocolError("--sizes must be between 1 and 256")
-    return sizes
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -52,14 +48,12 @@ def _bench(args: argparse.Namespace) -> int:
     elif args.what == "design":
         from .bench_paths import bench_design, format_design
 
-        result = bench_design(
-            _sizes(args.sizes, default=(8,))[0], args.range or 99, progress=not args.quiet
-        )
+        result = bench_design((args.sizes or (8,))[0], args.range or 99, progress=not args.quiet)
         text = format_design(result)
     else:
         from .bench_paths import bench_scaling, format_scaling
 
-        sizes = _sizes(args.sizes, default=(1, 2, 4, 8, 16, 32))
+        sizes = args.sizes or (1, 2, 4, 8, 16, 32)
         result = bench_scaling(
             sizes, args.suite, args.range or 99, progress=not args.quiet, repeat=args.repeat or 3
         )
@@ -68,17 +62,26 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m protocol", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
+def _parser() -> argparse.ArgumentParser:
+    parser = cli.Parser(prog="drone-deconflict-protocol", description=DESCRIPTION)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     demo = sub.add_parser("demo", help="two-drone demonstration")
     demo.set_defaults(func=_demo)
 
     compare = sub.add_parser("compare", help="run the encrypted path comparison on two files")
-    compare.add_argument("alice", help="Alice's paths: paper format (x,y)(x,y)... or .plan")
-    compare.add_argument("bob", help="Bob's paths, same format as Alice's")
-    compare.add_argument("--suite", choices=["compact", "paper"], default="compact")
-    compare.add_argument("--range", type=int, default=None, help="public grid range R")
+    compare.add_argument(
+        "alice", type=cli.existing_file, help="Alice's paths: paper format (x,y)(x,y)..."
+    )
+    compare.add_argument("bob", type=cli.existing_file, help="Bob's paths, same format")
+    compare.add_argument(
+        "--suite", choices=["compact", "paper"], default="compact", help="cryptographic suite"
+    )
+    compare.add_argument(
+        "--range",
+        type=cli.integer(1, 1 << 28),
+        default=None,
+        help="public grid range R (default: the files' extent)",
+    )
     compare.add_argument("--json", action="store_true", help="machine-readable output")
     compare.set_defaults(func=_compare)
 
@@ -88,30 +91,39 @@ def main(argv: list[str] | None = None) -> int:
         choices=["crypto", "paper", "scaling", "design"],
         help="what to measure",
     )
-    bench.add_argument("--suite", choices=["compact", "paper"], default="compact")
-    bench.add_argument("--data", help="directory with the paper's data (paper)")
+    bench.add_argument(
+        "--suite", choices=["compact", "paper"], default="compact", help="cryptographic suite"
+    )
+    bench.add_argument("--data", help="directory with the paper's data (paper; default: bundled)")
     bench.add_argument(
         "--sizes",
+        type=cli.integers(1, 256),
         default=None,
         help="n = m values, comma-separated (scaling; default 1,2,4,8,16,32), or the one size "
         "(design; default 8)",
     )
-    bench.add_argument("--range", type=int, default=None, help="coordinate range (scaling)")
+    bench.add_argument(
+        "--range",
+        type=cli.integer(1, 1 << 28),
+        default=None,
+        help="coordinate range (scaling, design; default 99)",
+    )
     bench.add_argument("--json", action="store_true", help="machine-readable output")
     bench.add_argument(
-        "--repeat", type=int, default=None, help="runs per median (crypto: 15, scaling: 3)"
+        "--repeat",
+        type=cli.integer(1, 1000),
+        default=None,
+        help="runs per median (default: crypto 15, scaling 3)",
     )
     bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     bench.set_defaults(func=_bench)
-    args = parser.parse_args(argv)
-    if getattr(args, "repeat", None) is not None and args.repeat < 1:
-        parser.error("--repeat must be at least 1")
-    try:
-        code: int = args.func(args)
-    except ProtocolError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    return code
+    cli.add_common(parser)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    return cli.run(args.func, args)
 
 
 if __name__ == "__main__":

@@ -1,12 +1,13 @@
 """Re-run the benchmarks and rewrite their sections of docs/benchmarks.md.
 
 Usage: .venv/bin/python scripts/record_benchmarks.py [crypto] [paper] [paper-dgk] [scaling]
-[scaling-2000] [design] [link] [replays] [replays-px4] (default: all; replays-px4 only with
-PX4_SITL set to a PX4 SITL build) [--repeat N]
+[scaling-2000] [design] [link] [replays] [replays-px4] [demo] (default: all; replays-px4 only
+with PX4_SITL set to a PX4 SITL build) [--repeat N]
 
 Each section sits between markers ``<!-- bench NAME -->`` and ``<!-- /bench NAME -->``; the
-rest of the file is kept.  The new file is written next to the old one and renamed over it, so
-an interrupted run leaves the old file intact.
+rest of the file is kept.  ``demo`` is README.md's: the summary ``make demo`` prints, so the
+README's numbers are a run's, not typed in.  The new file is written next to the old one and
+renamed over it, so an interrupted run leaves the old file intact.
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ from protocol.bench_paths import (
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "benchmarks.md"
+README = ROOT / "README.md"
+TARGETS = {"demo": README}  # sections kept in another file than DOC
 SCENARIOS = ROOT / "sitl_configs" / "scenarios"
 
 
@@ -68,10 +71,10 @@ def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
             lines.append(f"| {path.stem} | failed: {run.stderr.strip()[-200:]} |")
             continue
         r = json.loads(run.stdout)
-        results = [e["t"] for d in r["drones"] for e in d["timeline"] if e["kind"] == "result"]
+        results = [e["t_s"] for d in r["drones"] for e in d["timeline"] if e["kind"] == "result"]
         meets = [
             f"{p['closest_approach_baseline_m']:.1f} -> {p['closest_approach_m']:.1f} m"
-            + (f" (t = {p['closest_approach_t']:.0f} s)" if p.get("closest_approach_t") else "")
+            + (f" (t = {p['closest_approach_t_s']:.0f} s)" if p.get("closest_approach_t_s") else "")
             for p in r["pairs"]
             if p["conflict"] and p.get("trusted", True)
         ]
@@ -89,6 +92,21 @@ def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
     return "\n".join(lines)
 
 
+def demo() -> str:
+    """What ``make demo`` prints: the crossing replay's text summary (one run)."""
+    print("  ... replay crossing (the demo)", file=sys.stderr, flush=True)
+    run = subprocess.run(  # noqa: S603 -- our own interpreter and scenario file
+        [sys.executable, "-m", "companion", "replay", str(SCENARIOS / "crossing.toml")],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if run.returncode not in (0, 1):
+        raise SystemExit(f"the demo failed: {run.stderr.strip()[-500:]}")
+    head = "One run (recorded by `scripts/record_benchmarks.py demo`):"
+    return f"{head}\n\n```\n{run.stdout.strip()}\n```"
+
+
 def sections(repeat: int) -> dict[str, Callable[[], str]]:
     return {
         "crypto": lambda: format_crypto(bench_crypto(repeat=repeat)),
@@ -103,6 +121,7 @@ def sections(repeat: int) -> dict[str, Callable[[], str]]:
         "replays-px4": lambda: replays(
             os.environ.get("PX4_SITL", ""), ("crossing", "inflight_crossing")
         ),
+        "demo": demo,
     }
 
 
@@ -126,17 +145,18 @@ def main() -> int:
         parser.error(f"unknown sections: {', '.join(sorted(unknown))}")
     table = sections(args.repeat)
     machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
-    text = DOC.read_text() if DOC.exists() else "# Benchmarks\n"
     default = [n for n in table if n != "replays-px4" or os.environ.get("PX4_SITL")]
     if "replays-px4" in args.names and not os.environ.get("PX4_SITL"):
         parser.error("replays-px4 needs PX4_SITL=path of a PX4 SITL build")
     for name in args.names or default:
+        doc = TARGETS.get(name, DOC)
+        text = doc.read_text() if doc.exists() else "# Benchmarks\n"
         body = f"Machine: {machine}.\n\n{table[name]()}"
         print(body, flush=True)
         text = replace_section(text, name, body)
-        tmp = DOC.with_suffix(".md.tmp")
+        tmp = doc.with_suffix(".md.tmp")
         tmp.write_text(text)
-        tmp.replace(DOC)
+        tmp.replace(doc)
     return 0
 
 

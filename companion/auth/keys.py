@@ -15,14 +15,14 @@ SubjectPublicKeyInfo PEM (both read by ``openssl pkey``).  A public key may also
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 from cryptography.exceptions import InvalidSignature, UnsupportedAlgorithm
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
+
+from protocol import cli
 
 PUBLIC_SIZE = 32
 SIGNATURE_SIZE = 64
@@ -103,25 +103,14 @@ class SigningKey:
 
 
 def write_atomic(path: Path, data: bytes, mode: int = 0o644) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same directory: the file is
-    either the old one or the whole new one, never half written."""
+    """Write ``data`` to ``path`` whole or not at all (:func:`protocol.cli.write_atomic`)."""
     path = Path(path)
     if not path.parent.is_dir():
         raise KeyFileError(f"{path}: directory {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     try:
-        os.fchmod(fd, mode)
-        with os.fdopen(fd, "wb") as out:
-            out.write(data)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(tmp, path)
+        cli.write_atomic(path, data, mode)
     except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
         raise KeyFileError(f"{path}: {exc.strerror or exc}") from None
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def write_private_key(path: Path, key: SigningKey) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import math
 import random
 import secrets
@@ -43,6 +44,7 @@ from .frames import (
 from .medium import Transport
 from .reassembly import Delivered, Receiver
 
+log = logging.getLogger("companion.link")
 _JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
 
 MAX_DEFER_S = 8.0  # listen before talk gives up waiting after this long (or three of the
@@ -85,6 +87,7 @@ class LinkStats:
     airtime_s: float = 0.0
     duty_wait_s: float = 0.0
     frames_received: int = 0
+    bytes_received: int = 0  # frames addressed to us, headers included
     messages_sent: int = 0
     messages_received: int = 0
     dropped: dict[str, int] = field(default_factory=dict)
@@ -280,6 +283,17 @@ class LinkEndpoint:
                 self.stats.frames_retransmitted += out.retransmissions
             sess.last_heard = self.clock.now()
             self.stats.messages_sent += 1
+            log.debug(
+                "node %d -> %d session %d: message %d of %d B acknowledged (%d fragments, "
+                "%d retransmitted)",
+                self.node,
+                peer,
+                session,
+                seq,
+                len(data),
+                len(out.fragments),
+                out.retransmissions,
+            )
 
     async def _await_ack(
         self, out: Outgoing, acked: asyncio.Event, sess: _Session, sent_at: float, sample: bool
@@ -324,6 +338,9 @@ class LinkEndpoint:
             if isinstance(item, PeerAborted):
                 raise item
             self.stats.messages_received += 1
+            log.debug(
+                "node %d <- %d session %d: message of %d B", self.node, peer, session, len(item)
+            )
             return item
 
     async def beacon(self, payload: bytes) -> None:
@@ -451,6 +468,7 @@ class LinkEndpoint:
         if frame.dst not in (self.node, BROADCAST):
             return  # overheard: another pair's traffic
         self.stats.frames_received += 1
+        self.stats.bytes_received += len(data)
         key = (frame.src, frame.session)
         sess = self._sessions.get(key)
         if sess is not None:

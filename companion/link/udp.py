@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import struct
 from typing import cast
 
@@ -22,6 +23,7 @@ from .airtime import PHY_MAX_FRAME
 from .clock import Clock
 from .medium import Channel, Receiver
 
+log = logging.getLogger("companion.link")
 _REG = struct.Struct(">cH")
 _TX = struct.Struct(">cHI")
 
@@ -90,6 +92,8 @@ class UdpTransport(asyncio.DatagramProtocol):
     def __init__(self, node: int, clock: Clock) -> None:
         self.node = node
         self.clock = clock
+        self.hub: tuple[str, int] | None = None
+        self.unreachable = 0  # datagrams the hub's host refused (nothing listens there)
         self._receiver: Receiver | None = None
         self.transport: asyncio.DatagramTransport | None = None
         self._keepalive: asyncio.Task[None] | None = None
@@ -102,6 +106,7 @@ class UdpTransport(asyncio.DatagramProtocol):
         _, radio = await loop.create_datagram_endpoint(
             lambda: cls(node, clock or Clock()), remote_addr=hub
         )
+        radio.hub = hub
         radio._register()
         radio._keepalive = asyncio.create_task(radio._keep_registered())
         await asyncio.sleep(0.01)  # let the registration reach the hub first
@@ -118,6 +123,21 @@ class UdpTransport(asyncio.DatagramProtocol):
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = cast(asyncio.DatagramTransport, transport)
+
+    def error_received(self, exc: Exception) -> None:
+        """The hub's host refused a datagram: warn at the first and every 100th."""
+        if self.unreachable % 100 == 0:
+            host, port = self.hub or ("?", 0)
+            log.warning(
+                "node %d: the link hub at %s:%d is unreachable (%s): is `python -m companion "
+                "link-hub --port %d` running?",
+                self.node,
+                host,
+                port,
+                exc.strerror if isinstance(exc, OSError) else exc,
+                port,
+            )
+        self.unreachable += 1
 
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
         if data[:1] == b"D" and self._receiver is not None:

@@ -291,7 +291,7 @@ async def test_standalone_mock_autopilot_process(tmp_path) -> None:  # type: ign
         proc.terminate()
         await asyncio.wait_for(proc.wait(), 20)
     assert proc.returncode == 0
-    assert (tmp_path / "track.csv").read_text().startswith("t_s,lat,lon,alt_m")
+    assert (tmp_path / "track.csv").read_text().startswith("t_s,lat_deg,lon_deg,alt_m_amsl\n")
 
 
 @pytest.mark.slow

@@ -65,7 +65,7 @@ def test_compare_table_and_bad_profile(tmp_path: Path) -> None:
     bad = run_cli("compare", str(alice), str(bob), "--link", "eu433")
     assert bad.returncode == 2 and "unknown link profile" in bad.stderr
     worse = run_cli("compare", str(alice), str(bob), "--link", "ideal", "--loss", "1.5")
-    assert worse.returncode == 2 and "outside [0, 1)" in worse.stderr
+    assert worse.returncode == 2 and "--loss: 1.5 is out of range" in worse.stderr
 
 
 @pytest.mark.slow

@@ -6,9 +6,11 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
+from xml.etree import ElementTree
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
@@ -36,7 +38,9 @@ def _replay(name: str) -> dict:  # type: ignore[type-arg]
         timeout=240,
     )
     assert run.returncode in (0, 1), run.stderr[-3000:]
-    return json.loads(run.stdout)  # type: ignore[no-any-return]
+    report = json.loads(run.stdout)
+    assert run.returncode == (0 if report["ok"] else 1)  # exit 0 only for a clean replay
+    return report  # type: ignore[no-any-return]
 
 
 def check(report: dict, climbers: dict[int, int], *, every_conflict: bool = True) -> None:  # type: ignore[type-arg]
@@ -51,13 +55,15 @@ def check(report: dict, climbers: dict[int, int], *, every_conflict: bool = True
         assert flagged <= conflicting  # nothing flagged that the plain predicate clears
         if drone["id"] in climbers:
             assert flagged == conflicting if every_conflict else flagged  # Alice's 2-D conflicts
-            assert drone["verified"] and drone["edits"]
+            assert drone["edit"] == "verified" and drone["edits"]
             assert set(drone["levels"].values()) == {climbers[drone["id"]]}
-            assert drone["max_altitude_m"] >= 488.0 + 30.0 + climbers[drone["id"]] * offset - 0.5
+            assert (
+                drone["max_altitude_m_amsl"] >= 488.0 + 30.0 + climbers[drone["id"]] * offset - 0.5
+            )
         else:
-            assert not drone["edits"] and drone["verified"] is None
+            assert not drone["edits"] and drone["edit"] == "not needed"
         for event in drone["timeline"]:
-            assert event["t"] >= 0
+            assert event["t_s"] >= 0
     assert report["false_alarms"] == 0
     assert report["precautionary_actions"] == 0
     for pair in report["pairs"]:
@@ -67,13 +73,13 @@ def check(report: dict, climbers: dict[int, int], *, every_conflict: bool = True
             assert pair["closest_approach_m"] >= offset - RESOLVED_TOLERANCE_M
             assert pair["resolved"] and pair["acted"]
     assert report["conflicts_resolved"] == report["conflicts"]
+    assert report["ok"] and not report["problems"]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "climbers", "conflicts"),
     [
-        ("crossing", {1: 1}, 1),
         ("corridor", {1: 1}, 1),
         ("no_conflict", {}, 0),
         ("three_drones", {1: 1}, 2),
@@ -87,6 +93,46 @@ def test_scenario(name: str, climbers: dict[int, int], conflicts: int) -> None:
     assert report["conflicts"] == conflicts
     if name == "lossy_sf9":
         assert report["link"]["profile"] == "eu868-sf9" and report["link"]["loss"] == 0.3
+
+
+@pytest.mark.slow
+def test_crossing_as_a_user_runs_it(tmp_path: Path) -> None:
+    """``make demo``'s replay with every output: the text summary says OK and exit 0; the JSON
+    report, the PDF plot, the exports (CSV, KML, GeoJSON) and a JSON-lines log with the run's
+    progress are all written."""
+    out, plot, export, log = (tmp_path / n for n in ("r.json", "p.pdf", "exp", "log.jsonl"))
+    flags = ["--out", out, "--plot", plot, "--export", export, "--log-json", log]
+    run = subprocess.run(
+        [sys.executable, "-m", "companion", "replay", SCENARIOS / "crossing.toml", *flags],
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr[-3000:]
+    assert run.stdout.strip().splitlines()[-1].startswith("OK: every mission flown")
+    assert "MAVSDK version" not in run.stderr  # the library's chatter goes through logging
+    report = json.loads(out.read_text())
+    check(report, {1: 1})
+    assert report["conflicts"] == 1
+    assert plot.read_bytes().startswith(b"%PDF")
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    kinds = [e.get("event") for e in events]
+    assert {"run_started", "result", "uploaded", "answered"} <= set(kinds)
+    progress = [e["fields"] for e in events if e.get("event") == "run_progress"]
+    assert progress and all(p["sent_bytes"] >= 0 and p["elapsed_s"] > 0 for p in progress)
+    assert any(p["role"] == "alice" and p["expected_bytes"] > 1000 for p in progress)
+    rows = (export / "tracks.csv").read_text().splitlines()
+    assert rows[0] == "drone,t_s,lat_deg,lon_deg,alt_m_amsl" and len(rows) > 100
+    assert {row.split(",")[0] for row in rows[1:]} == {"1", "2"}
+    geo = json.loads((export / "encounter.geojson").read_text())
+    flagged = [f for f in geo["features"] if f["properties"]["kind"] == "flagged segment"]
+    assert [f["properties"]["drone"] for f in flagged] == [1]
+    lon, lat, _ = flagged[0]["geometry"]["coordinates"][0]
+    assert 8 < lon < 9 and 47 < lat < 48  # GeoJSON order: longitude first
+    kml = ElementTree.parse(export / "encounter.kml").getroot()
+    names = [e.text or "" for e in kml.iter("{http://www.opengis.net/kml/2.2}name")]
+    assert any("drone 1: flagged segment 0" in n for n in names)
+    assert any(n.startswith("drones 1-2: closest approach") for n in names)
 
 
 @pytest.mark.slow
@@ -136,21 +182,36 @@ def test_in_flight_scenario(name: str, heights: list[int], conflicts: int) -> No
             assert {"run_started", "result", "uploaded"} <= set(kinds)
 
 
-def test_bad_scenarios_are_refused(tmp_path: Path) -> None:
-    bad = tmp_path / "bad.toml"
-    for text, message in [
-        ("time_scale = 'fast'\n[[drone]]\nid=1\nmission='a.plan'\n", "time_scale"),
-        ("[link]\nprofile = 'eu433'\n", "unknown link profile"),
+GOOD_DRONES = "[[drone]]\nid = 1\nmission = 'a.plan'\n[[drone]]\nid = 2\nmission = 'a.plan'\n"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("time_scale = 'fast'\n" + GOOD_DRONES, "time_scale: expected a number"),
+        ("time_scale = 0\n" + GOOD_DRONES, "time_scale: 0 is out of range"),
+        ("time_scale = nan\n" + GOOD_DRONES, "time_scale: nan is not a finite number"),
+        ("time_scael = 10\n" + GOOD_DRONES, "unknown key 'time_scael' .did you mean 'time_scale'"),
+        ("[link]\nprofile = 'eu433'\n" + GOOD_DRONES, r"\[link\]: profile: 'eu433' is not one"),
+        ("[link]\nprofle = 'us915-sf9'\n" + GOOD_DRONES, "unknown key 'profle'"),
+        ("[link]\nlos = 0.1\n" + GOOD_DRONES, "unknown key 'los' .did you mean 'loss'"),
+        ("[link]\nloss = 1.5\n" + GOOD_DRONES, "loss: 1.5 is out of range"),
         ("[[drone]]\nid = 1\nmission = 'a.plan'\n", "at least two"),
-        (
-            "[[drone]]\nid = 1\nmission = 'missing.plan'\n[[drone]]\nid = 2\nmission = 'x'\n",
-            "drone 1",
-        ),
-        ("not toml [", "bad.toml"),
-    ]:
-        bad.write_text(text)
-        with pytest.raises(ScenarioError, match=message):
-            load_scenario(bad)
+        (GOOD_DRONES.replace("id = 1", "id = 1\ntakeof_delay_s = 5"), "drone 1: unknown key"),
+        (GOOD_DRONES.replace("id = 2", "id = 1"), "drone 2: id: 1 is taken"),
+        (GOOD_DRONES.replace("'a.plan'\n[", "'missing.plan'\n["), "drone 1: .*missing.plan"),
+        ("not toml [", "bad.toml: not TOML"),
+    ],
+)
+def test_bad_scenarios_are_refused(tmp_path: Path, text: str, message: str) -> None:
+    """Every value checked, unknown keys named with the closest known one, the file named."""
+    shutil.copy(SCENARIOS / "delivery_east.plan", tmp_path / "a.plan")
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text)
+    with pytest.raises(ScenarioError, match=message):
+        load_scenario(bad)
+    bad.write_text(GOOD_DRONES)
+    assert len(load_scenario(bad).drones) == 2  # the same file without the mistake is read
 
 
 def _crossing(**changes: object) -> Scenario:

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import queue
 import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -89,14 +91,20 @@ def test_config_file_and_flags(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("", "node"),
-        ("node = 1\n[link]\nprofile = 'lora'\n", "link.profile"),
-        ("node = 1\n[link]\ntransport = 'wifi'\n", "link.transport"),
-        ("node = 1\n[offset]\noffset_m = -3\n", "offset"),
+        ("", "c.toml: node: a node id"),
+        ("node = 1\n[link]\nprofile = 'lora'\n", r"\[link\]: profile: 'lora' is not one of"),
+        ("node = 1\n[link]\ntransport = 'wifi'\n", r"\[link\]: transport"),
+        ("node = 1\n[offset]\noffset_m = -3\n", r"\[offset\]: offset_m: -3 is out of range"),
+        ("node = 1\n[offset]\noffset_m = nan\n", "offset_m: nan is not a finite number"),
         ("node = 1\n[limits]\nmax_runs_per_peer = 'many'\n", "max_runs_per_peer"),
         ("node = 1\nlog_level = 'loud'\n", "log_level"),
         ("node = 1\not_security = 80\n", "ot_security"),
-        ("node = [", "c.toml"),
+        ("node = [", "c.toml: not TOML"),
+        ("nod = 1\n", "c.toml: unknown key 'nod' \\(did you mean 'node'\\?\\)"),
+        ("node = 1\nnod = 1\n", "c.toml: unknown key 'nod' \\(did you mean 'node'\\?\\)"),
+        ("node = 1\n[link]\nprofle = 'us915-sf9'\n", r"\[link\]: unknown key 'profle'"),
+        ("node = 1\n[link]\nhub = 'localhost:99999'\n", r"\[link\]: hub: .*1..65535"),
+        ("node = true\n", "node: expected an integer"),
     ],
 )
 def test_config_errors(tmp_path: Path, text: str, message: str) -> None:
@@ -115,12 +123,35 @@ def _spawn(*args: str) -> subprocess.Popen[str]:
     )
 
 
+_LINES: dict[int, queue.Queue[str]] = {}
+
+
+def _lines(proc: subprocess.Popen[str]) -> queue.Queue[str]:
+    """The process's output lines, read by a thread (a silent process cannot block a test)."""
+    if proc.pid not in _LINES:
+        lines: queue.Queue[str] = queue.Queue()
+        stream = proc.stdout
+        assert stream is not None
+
+        def pump() -> None:
+            for line in stream:
+                lines.put(line)
+            lines.put("")  # end of output
+
+        threading.Thread(target=pump, daemon=True).start()
+        _LINES[proc.pid] = lines
+    return _LINES[proc.pid]
+
+
 def _wait_for(proc: subprocess.Popen[str], pattern: str, seconds: float = 30) -> str:
-    assert proc.stdout is not None
+    lines = _lines(proc)
     deadline = time.monotonic() + seconds
     seen = []
     while time.monotonic() < deadline:
-        line = proc.stdout.readline()
+        try:
+            line = lines.get(timeout=max(deadline - time.monotonic(), 0.01))
+        except queue.Empty:
+            break
         if not line:
             break
         seen.append(line)
@@ -146,7 +177,7 @@ def test_companion_process_starts_and_stops_cleanly(tmp_path: Path) -> None:
         )
         companion = _spawn("run", "--config", str(config))
         try:
-            _wait_for(companion, r"node 7 mission .*'segments': 4")
+            _wait_for(companion, r"node 7: mission \(.*segments=4")
             _wait_for(companion, "running")
             companion.send_signal(signal.SIGTERM)
             _wait_for(companion, "stopping")
@@ -166,7 +197,7 @@ def test_no_autopilot_is_a_clear_error(tmp_path: Path) -> None:
         + identity(tmp_path, 7)
     )
     run = _companion("run", "--config", str(config))
-    assert run.returncode == 1 and "no autopilot heard" in run.stderr
+    assert run.returncode == 2 and "no autopilot heard" in run.stderr  # the environment
     config.write_text('node = 7\nautopilot = "udpin://127.0.0.1:14599"\n')
     anonymous = _companion("run", "--config", str(config))
     assert anonymous.returncode == 2 and "needs an identity" in anonymous.stderr

@@ -30,7 +30,7 @@ def test_crossing_on_two_px4_vehicles(px4_build: Px4Build) -> None:
     first, second = report["drones"]
     assert first["vehicle"] == second["vehicle"] == "px4-sitl"
     assert first["flagged_segments"] == first["conflicting_segments"] == [0]  # the crossing
-    assert first["verified"] and first["vehicle_holds"] == "edited"
+    assert first["edit"] == "verified" and first["vehicle_holds"] == "edited"
     assert not second["edits"] and second["vehicle_holds"] == "original"
     (pair,) = report["pairs"]
     assert pair["conflict"] and pair["closest_approach_baseline_m"] < 2.0

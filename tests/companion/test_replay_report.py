@@ -1,0 +1,118 @@
+"""The replay's verdict: exit 0 and "OK" only when nothing went wrong; every failure named."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import pytest
+
+from companion.replay import format_report, problems
+
+
+def _drone(ident: int, **changes: Any) -> dict[str, Any]:
+    drone = {
+        "id": ident,
+        "operator": "fleet",
+        "autopilot": "px4",
+        "vehicle": "mock",
+        "edit": "not needed",
+        "levels": {},
+        "precautionary": [],
+        "failures": [],
+        "runs_unfinished": 0,
+        "untrusted_heard": [],
+        "auth": {"run_bytes": 200, "beacon_added_bytes": 300},
+        "bytes_sent": 1000,
+        "frames_sent": 10,
+        "airtime_s": 2.0,
+    }
+    return drone | changes
+
+
+GOOD: dict[str, Any] = {
+    "scenario": "crossing",
+    "link": {"profile": "us915-sf7", "loss": 0.1, "seed": 1},
+    "time_scale": 40.0,
+    "finished": True,
+    "offset_m": 10.0,
+    "drones": [_drone(1, edit="verified", levels={"0": 1}), _drone(2)],
+    "pairs": [
+        {
+            "drones": [1, 2],
+            "trusted": True,
+            "conflict": True,
+            "resolved": True,
+            "closest_approach_m": 10.1,
+            "closest_approach_baseline_m": 0.3,
+            "closest_approach_t_s": 184.0,
+        }
+    ],
+    "conflicts": 1,
+    "conflicts_resolved": 1,
+    "untrusted_conflicts": 0,
+    "precautionary_actions": 0,
+    "false_alarms": 0,
+}
+
+
+def _report(change: Any) -> dict[str, Any]:
+    report = copy.deepcopy(GOOD)
+    change(report)
+    report["problems"] = problems(report)
+    return report
+
+
+def test_a_clean_replay_says_ok() -> None:
+    report = _report(lambda r: None)
+    assert report["problems"] == []
+    text = format_report(report)
+    assert text.splitlines()[-1].startswith("OK: every mission flown")
+    assert "flies segments 0 (+10 m) higher (upload verified)" in text
+    assert "drone 2 (px4, fleet): kept its altitude (no edit needed)" in text
+
+
+def _plan_failed(r: dict[str, Any]) -> None:
+    r["drones"][0] |= {
+        "edit": "failed",
+        "levels": {},
+        "failures": [{"kind": "plan_failed", "error": "item 1: -40.0 m below the minimum"}],
+    }
+    r["pairs"][0] |= {"conflict": False, "resolved": False}
+    r["conflicts"] = r["conflicts_resolved"] = 0
+
+
+def _time_limit(r: dict[str, Any]) -> None:
+    r["finished"] = False
+
+
+def _unresolved(r: dict[str, Any]) -> None:
+    r["pairs"][0] |= {"resolved": False, "closest_approach_m": 0.6}
+    r["conflicts_resolved"] = 0
+
+
+def _unfinished_run(r: dict[str, Any]) -> None:
+    r["drones"][1]["runs_unfinished"] = 1
+
+
+def _false_alarm(r: dict[str, Any]) -> None:
+    r["false_alarms"] = 2
+
+
+@pytest.mark.parametrize(
+    ("change", "says"),
+    [
+        (_plan_failed, "drone 1: plan failed: item 1: -40.0 m below the minimum"),
+        (_time_limit, "the time limit ended the replay"),
+        (_unresolved, "drones 1-2: conflict NOT resolved (closest approach 0.6 m"),
+        (_unfinished_run, "drone 2: 1 run(s) never finished"),
+        (_false_alarm, "2 segment(s) flagged that do not cross"),
+    ],
+)
+def test_every_failure_is_stated_and_fails_the_replay(change: Any, says: str) -> None:
+    """A summary never says OK for what did not happen (the planner failing with "0/0"
+    conflicts once printed a clean summary and exit 0)."""
+    report = _report(change)
+    assert report["problems"] and any(says in p for p in report["problems"])
+    text = format_report(report)
+    assert "FAILED" in text and says in text and "OK:" not in text
