@@ -28,6 +28,7 @@ schedule, the same flight model stepped offline) gives the separations one would
 from __future__ import annotations
 
 import asyncio
+import itertools
 import logging
 import math
 import socket
@@ -559,6 +560,7 @@ def _report(
         "false_alarms": false_alarms,
     }
     report["problems"] = problems(report)
+    report["notes"] = notes(report)
     report["ok"] = not report["problems"]
     return report
 
@@ -589,6 +591,22 @@ def _unfinished(c: Companion) -> int:
     return open_runs
 
 
+def notes(report: dict[str, Any]) -> list[str]:
+    """What the summary states without failing the replay: precautionary actions, runs that
+    failed (and were retried), runs the end of the replay cut off (every mission flown)."""
+    out = []
+    for d in report["drones"]:
+        if d["precautionary"]:
+            out.append(f"drone {d['id']}: {len(d['precautionary'])} precautionary action(s)")
+        failed = [f for f in d["failures"] if f["kind"] not in FAILED_EVENTS]
+        if failed:
+            kinds = ", ".join(sorted({f["kind"].replace("_", " ") for f in failed}))
+            out.append(f"drone {d['id']}: {len(failed)} run(s) ended without a result ({kinds})")
+        if d["runs_unfinished"]:
+            out.append(f"drone {d['id']}: {d['runs_unfinished']} run(s) still under way at the end")
+    return out
+
+
 def problems(report: dict[str, Any]) -> list[str]:
     """Everything that makes a replay a failure, one line each (empty: it succeeded)."""
     out = []
@@ -599,8 +617,6 @@ def problems(report: dict[str, Any]) -> list[str]:
             if failure["kind"] in FAILED_EVENTS:
                 why = failure.get("error") or failure.get("why") or ""
                 out.append(f"drone {d['id']}: {failure['kind'].replace('_', ' ')}: {why}")
-        if d["runs_unfinished"]:
-            out.append(f"drone {d['id']}: {d['runs_unfinished']} run(s) never finished")
     for p in report["pairs"]:
         if p["conflict"] and p["trusted"] and not p["resolved"]:
             a, b = p["drones"]
@@ -691,6 +707,9 @@ def format_report(report: dict[str, Any]) -> str:
             else ""
         )
     )
+    if report.get("notes"):
+        lines.append("Notes:")
+        lines.extend(f"  - {line}" for line in report["notes"])
     if report["problems"]:
         lines.append(f"FAILED ({len(report['problems'])} problem(s)):")
         lines.extend(f"  - {line}" for line in report["problems"])
@@ -713,7 +732,7 @@ PLOT_FORMATS = ("png", "pdf", "svg")
 def plot_report(replay: Replay, out: str | Path) -> None:
     """PNG, PDF or SVG (by ``out``'s ending): ground tracks (planned, flown, direction,
     closest approaches), the distance of every pair over time with the runs' moments marked,
-    and altitudes around the encounters."""
+    and altitudes over the flight window."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -744,12 +763,13 @@ def plot_report(replay: Replay, out: str | Path) -> None:
         flown = [en(lat, lon) for _, lat, lon, _ in tracks.flown[ident]]
         if len(flown) > 1:
             ground.plot(*zip(*flown, strict=True), color=c, lw=1.6, label=f"drone {ident} flown")
-            step = max(1, len(flown) // 6)
-            for (x0, y0), (x1, y1) in zip(flown[::step], flown[1::step], strict=False):
-                if (x0, y0) != (x1, y1):
-                    ground.annotate(
-                        "", (x1, y1), (x0, y0), arrowprops={"arrowstyle": "->", "color": c}
-                    )
+            for tail, head in _arrows(flown, ARROWS):
+                ground.annotate(
+                    "",
+                    head,
+                    tail,
+                    arrowprops={"arrowstyle": "-|>", "color": c, "mutation_scale": 18, "lw": 0},
+                )
     for pair in report["pairs"]:
         a, b = pair["drones"]
         _, t, pa, pb = _closest(tracks.flown[a], tracks.flown[b])
@@ -766,7 +786,6 @@ def plot_report(replay: Replay, out: str | Path) -> None:
     ground.set_aspect("equal", adjustable="datalim")
     ground.legend(loc="best", fontsize=7)
 
-    moments: list[float] = []
     for pair in report["pairs"]:
         a, b = pair["drones"]
         for which, style in ((tracks.flown, "-"), (tracks.baseline, ":")):
@@ -789,8 +808,6 @@ def plot_report(replay: Replay, out: str | Path) -> None:
                     gap.plot(
                         event["t_s"], 0, marker, color=colour[drone["id"]], ms=8, clip_on=False
                     )
-                    moments.append(event["t_s"])
-        moments.append(pair["closest_approach_t_s"])
     for marker, label in MARKERS.values():
         gap.plot([], [], marker, color="grey", label=label)
     gap.axhline(report["offset_m"], color="red", lw=0.8, ls="--", label="offset")
@@ -813,12 +830,13 @@ def plot_report(replay: Replay, out: str | Path) -> None:
                 lw=1 if style == "--" else 1.5,
                 label=f"drone {ident} {label}",
             )
-    if moments:
-        height.set_xlim(max(min(moments) - 60, 0), max(moments) + 60)
+    window = _flight_window(tracks.flown)
+    if window is not None:  # hours on the ground waiting for airtime would hide the flight
+        height.set_xlim(*window)
     height.set(
         xlabel="simulated time (s)",
         ylabel="altitude AMSL (m)",
-        title="altitude around the encounters",
+        title="altitude while flying",
     )
     height.legend(loc="best", fontsize=7)
     fig.tight_layout()
@@ -829,6 +847,45 @@ def plot_report(replay: Replay, out: str | Path) -> None:
     finally:
         plt.close(fig)
         tmp.unlink(missing_ok=True)
+
+
+def _flight_window(flown: dict[int, Track], margin_s: float = 30.0) -> tuple[float, float] | None:
+    """From the first take-off to the last landing (any drone 2 m above where it started)."""
+    airborne = [
+        t for track in flown.values() if track for t, *_, alt in track if alt > track[0][3] + 2.0
+    ]
+    if not airborne:
+        return None
+    return max(min(airborne) - margin_s, 0.0), max(airborne) + margin_s
+
+
+ARROWS = 6  # direction arrows along each flown track
+
+
+def _arrows(
+    points: list[tuple[float, float]], count: int
+) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """(tail, head) of ``count`` short arrows spread evenly by distance along ``points`` (a
+    track that holds still for minutes still gets its arrows where it moves)."""
+    steps = [math.dist(p, q) for p, q in itertools.pairwise(points)]
+    length = sum(steps)
+    if length <= 0:
+        return []
+    out, walked, k = [], 0.0, 0
+    for n in range(count):
+        goal = length * (n + 0.5) / count
+        while k < len(steps) - 1 and walked + steps[k] < goal:
+            walked += steps[k]
+            k += 1
+        (x0, y0), (x1, y1) = points[k], points[k + 1]
+        if steps[k] == 0:
+            continue
+        f = (goal - walked) / steps[k]
+        dx, dy = (x1 - x0) / steps[k], (y1 - y0) / steps[k]
+        x, y = x0 + f * (x1 - x0), y0 + f * (y1 - y0)
+        size = length * 0.01
+        out.append(((x - dx * size, y - dy * size), (x + dx * size, y + dy * size)))
+    return out
 
 
 def _separation(a: Track, b: Track) -> list[tuple[float, float]]:

@@ -73,7 +73,7 @@ def check(report: dict, climbers: dict[int, int], *, every_conflict: bool = True
             assert pair["closest_approach_m"] >= offset - RESOLVED_TOLERANCE_M
             assert pair["resolved"] and pair["acted"]
     assert report["conflicts_resolved"] == report["conflicts"]
-    assert report["ok"] and not report["problems"]
+    assert report["ok"] and not report["problems"], report["problems"]
 
 
 @pytest.mark.slow

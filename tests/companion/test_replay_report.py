@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from companion.replay import format_report, problems
+from companion.replay import format_report, notes, problems
 
 
 def _drone(ident: int, **changes: Any) -> dict[str, Any]:
@@ -99,13 +99,33 @@ def _false_alarm(r: dict[str, Any]) -> None:
     r["false_alarms"] = 2
 
 
+def test_what_does_not_fail_a_replay_is_still_stated() -> None:
+    """A run cut off by the end (every mission flown), a failed run that was retried and a
+    precautionary action are said in the summary; only the failures above fail it."""
+
+    def change(r: dict[str, Any]) -> None:
+        r["drones"][1] |= {
+            "runs_unfinished": 1,
+            "failures": [{"kind": "run_failed", "error": "nothing from node 1 for 60 s"}],
+            "precautionary": [{"t_s": 90.0, "action": "climb", "peer": 1}],
+        }
+
+    report = _report(change)
+    assert report["problems"] == []
+    report["notes"] = notes(report)
+    text = format_report(report)
+    assert "drone 2: 1 run(s) still under way at the end" in text
+    assert "drone 2: 1 run(s) ended without a result (run failed)" in text
+    assert "drone 2: 1 precautionary action(s)" in text
+    assert text.splitlines()[-1].startswith("OK:")
+
+
 @pytest.mark.parametrize(
     ("change", "says"),
     [
         (_plan_failed, "drone 1: plan failed: item 1: -40.0 m below the minimum"),
         (_time_limit, "the time limit ended the replay"),
         (_unresolved, "drones 1-2: conflict NOT resolved (closest approach 0.6 m"),
-        (_unfinished_run, "drone 2: 1 run(s) never finished"),
         (_false_alarm, "2 segment(s) flagged that do not cross"),
     ],
 )
