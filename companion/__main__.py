@@ -1,6 +1,6 @@
 """Command line of the flight companion (``drone-deconflict`` or ``python -m companion``):
 run, keys, replay, compare, bench-link, radio-demo, link-hub, mock-autopilot, mission show.
-Errors are one line and exit 2 (:mod:`protocol.cli`)."""
+Errors are one line and exit 2 (:mod:`protocol.tools.cli`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import signal
 import sys
 from pathlib import Path
 
-from protocol import cli
+from protocol.tools import cli
 
 from . import keys_cli, logs
 from .link import Channel, Clock, Impairments
@@ -60,7 +60,7 @@ async def _hub(args: argparse.Namespace) -> int:
 
 async def _mock(args: argparse.Namespace) -> int:
     from .missionfile import read_mission_file
-    from .mock_autopilot import Faults, FlightModel, MockAutopilot
+    from .sim.mock_autopilot import Faults, FlightModel, MockAutopilot
 
     given = (args.home_lat, args.home_lon, args.home_alt)
     home = tuple(DEFAULT_HOME[i] if v is None else v for i, v in enumerate(given))
@@ -99,7 +99,7 @@ async def _mock(args: argparse.Namespace) -> int:
         )
         await stop.wait()
     if args.trajectory:
-        from .replay_export import track_csv
+        from .sim.export import track_csv
 
         cli.write_atomic(args.trajectory, track_csv(mock.trajectory))
     return 0
@@ -213,9 +213,12 @@ async def _run(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from .replay import PX4_SPEED_MAX, format_report, load_scenario, plot_report, run_replay
-    from .replay_export import export
-    from .sim_px4 import Px4Error, find_build
+    from .sim.export import export
+    from .sim.plot import plot_report
+    from .sim.px4 import Px4Error, find_build
+    from .sim.replay import PX4_SPEED_MAX, run_replay
+    from .sim.report import format_report
+    from .sim.scenario import load_scenario
 
     level = args.log_level or ("info" if args.log_json else "warning")
     logs.setup(level, args.log_json, stderr_level=args.log_level or "warning", mavsdk=True)
@@ -246,10 +249,10 @@ def _replay(args: argparse.Namespace) -> int:
 
 def _compare(args: argparse.Namespace) -> int:
     """The protocol's comparison over the simulated radio (the radio is the companion's)."""
-    from protocol.compare import format_compare
+    from protocol.tools.compare import format_compare
 
     from .link import profile
-    from .over_link import compare_over_link
+    from .sim.over_link import compare_over_link
 
     link = profile(args.link)
     if args.mtu is not None:
@@ -275,9 +278,9 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _bench_link(args: argparse.Namespace) -> int:
-    from protocol.bench_paths import DEFAULT_DATA
+    from protocol.tools.bench_paths import DEFAULT_DATA
 
-    from .over_link import bench_link, format_link
+    from .sim.over_link import bench_link, format_link
 
     data = Path(args.data) if args.data else DEFAULT_DATA
     profiles = list(args.profiles) if args.profiles else None
@@ -498,7 +501,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _radio_demo() -> int:
-    from .over_link import radio_demo
+    from .sim.over_link import radio_demo
 
     return radio_demo()
 
@@ -510,7 +513,7 @@ def _run_command(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     from .autopilot import AutopilotError
     from .link.arq import LinkError
-    from .sim_px4 import Px4Error
+    from .sim.px4 import Px4Error
 
     args = _parser().parse_args(argv)
     return cli.run(args.func, args, (AutopilotError, LinkError, Px4Error))

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from protocol import cli
+from protocol.tools import cli
 
 from .auth.certificate import SIZE as CERT_SIZE
 from .auth.certificate import Certificate
@@ -95,7 +95,7 @@ def _describe(path: Path, operator: PublicKey | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """One action; failures raise (one line and exit 2 by :func:`protocol.cli.run`)."""
+    """One action; failures raise (one line and exit 2 by :func:`protocol.tools.cli.run`)."""
     if args.action == "init":
         path = Path(args.file)
         public = path.with_suffix(".pub")

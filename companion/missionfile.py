@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from protocol import cli
+from protocol.tools import cli
 
 from .flightpath import DO_JUMP
 from .mission import (

@@ -103,6 +103,7 @@ WARNING_EVENTS = frozenset(
         "precautionary",
         "resume_failed",
         "run_failed",
+        "task_failed",
         "upload_failed",
     }
 )
@@ -297,11 +298,24 @@ class Companion:
             asyncio.create_task(self._alice_loop(), name="alice"),
             asyncio.create_task(self._guard(), name="guard"),
         ]
+        for task in self._tasks:
+            task.add_done_callback(self._ended)
 
     def _spawn(self, work: Any) -> None:
         task = asyncio.create_task(work)
         self._children.add(task)
-        task.add_done_callback(self._children.discard)
+        task.add_done_callback(self._ended)
+
+    def _ended(self, task: asyncio.Task[None]) -> None:
+        """A task of ours ended: a failure is logged with its traceback and recorded (a
+        companion whose beacons or answers died must say so, not go quiet)."""
+        self._children.discard(task)
+        if task.cancelled():
+            return
+        exc = task.exception()
+        if exc is not None:
+            log.error("node %d: task %s failed", self.settings.node, task.get_name(), exc_info=exc)
+            self.record("task_failed", task=task.get_name(), error=repr(exc))
 
     async def stop(self) -> None:
         for task in [*self._tasks, *self._children]:

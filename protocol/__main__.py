@@ -1,6 +1,6 @@
 """Command line of the cryptographic core (``drone-deconflict-protocol`` or
 ``python -m protocol``): demo, compare, bench crypto|paper|scaling|design.  Errors are one
-line and exit 2 (:mod:`protocol.cli`)."""
+line and exit 2 (:mod:`protocol.tools.cli`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import json
 import sys
 from pathlib import Path
 
-from . import cli
+from .tools import cli
 
 DESCRIPTION = (
     "The encrypted path-intersection protocol of private drone deconfliction: Alice learns "
@@ -19,13 +19,13 @@ DESCRIPTION = (
 
 
 def _demo(_args: argparse.Namespace) -> int:
-    from .demo import run_demo
+    from .tools.demo import run_demo
 
     return run_demo()
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from .compare import compare, format_compare
+    from .tools.compare import compare, format_compare
 
     result = compare(args.alice, args.bob, args.suite, range_=args.range, progress=not args.json)
     print(json.dumps(result, indent=2) if args.json else format_compare(result))
@@ -35,23 +35,23 @@ def _compare(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     result: dict[str, object]
     if args.what == "crypto":
-        from .bench import bench_crypto, format_crypto
+        from .tools.bench import bench_crypto, format_crypto
 
         result = bench_crypto(repeat=args.repeat or 15, progress=not args.quiet)
         text = format_crypto(result)
     elif args.what == "paper":
-        from .bench_paths import DEFAULT_DATA, bench_paper, format_paper
+        from .tools.bench_paths import DEFAULT_DATA, bench_paper, format_paper
 
         data = Path(args.data) if args.data else DEFAULT_DATA
         result = bench_paper(data, args.suite, progress=not args.quiet)
         text = format_paper(result)
     elif args.what == "design":
-        from .bench_paths import bench_design, format_design
+        from .tools.bench_paths import bench_design, format_design
 
         result = bench_design((args.sizes or (8,))[0], args.range or 99, progress=not args.quiet)
         text = format_design(result)
     else:
-        from .bench_paths import bench_scaling, format_scaling
+        from .tools.bench_paths import bench_scaling, format_scaling
 
         sizes = args.sizes or (1, 2, 4, 8, 16, 32)
         result = bench_scaling(

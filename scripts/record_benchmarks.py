@@ -21,9 +21,9 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from companion.over_link import bench_link, format_link
-from protocol.bench import bench_crypto, format_crypto
-from protocol.bench_paths import (
+from companion.sim.over_link import bench_link, format_link
+from protocol.tools.bench import bench_crypto, format_crypto
+from protocol.tools.bench_paths import (
     bench_design,
     bench_paper,
     bench_scaling,

@@ -1,6 +1,6 @@
 """Every command line, fed the ordinary mistakes of a new user: each must answer with one line
 ``error: ...`` on stderr and exit code 2, never a traceback, never a half-written file, and
-before any work starts (protocol.cli's rules).  Both packages' commands, one table."""
+before any work starts (protocol.tools.cli's rules).  Both packages' commands, one table."""
 
 from __future__ import annotations
 

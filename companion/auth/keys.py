@@ -22,7 +22,7 @@ from cryptography.exceptions import InvalidSignature, UnsupportedAlgorithm
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
-from protocol import cli
+from protocol.tools import cli
 
 PUBLIC_SIZE = 32
 SIGNATURE_SIZE = 64
@@ -103,7 +103,7 @@ class SigningKey:
 
 
 def write_atomic(path: Path, data: bytes, mode: int = 0o644) -> None:
-    """Write ``data`` to ``path`` whole or not at all (:func:`protocol.cli.write_atomic`)."""
+    """Write ``data`` to ``path`` whole or not at all (:func:`protocol.tools.cli.write_atomic`)."""
     path = Path(path)
     if not path.parent.is_dir():
         raise KeyFileError(f"{path}: directory {path.parent} does not exist")

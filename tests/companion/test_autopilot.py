@@ -17,9 +17,9 @@ from companion.autopilot import Autopilot, AutopilotError, RolledBack, Timeouts
 from companion.autopilots import personality
 from companion.flightpath import flight_path
 from companion.mission import MissionItem, normalise
-from companion.mock_autopilot import Faults, FlightModel, MockAutopilot, item_message
 from companion.planner import plan_offsets
-from companion.replay import free_udp_port
+from companion.sim.mock_autopilot import Faults, FlightModel, MockAutopilot, item_message
+from companion.sim.replay import free_udp_port
 
 from .missions import HOME, item, survey
 

@@ -4,6 +4,7 @@ radio turns, and the planner's levels."""
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 import tempfile
 from pathlib import Path
@@ -21,7 +22,6 @@ from companion.link.endpoint import LinkEndpoint
 from companion.link.medium import SimMedium
 from companion.mission import MissionItem
 from companion.missionfile import read_plan
-from companion.over_link import link_case
 from companion.peers import (
     Peer,
     cut_at,
@@ -33,11 +33,12 @@ from companion.peers import (
 )
 from companion.planner import plan_offsets
 from companion.radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
-from companion.replay_fleet import make_fleet
 from companion.runtime import Companion, CompanionSettings, box_radius_m
-from protocol.compare import Case, Party
+from companion.sim.fleet import make_fleet
+from companion.sim.over_link import link_case
 from protocol.grid import GridKind, GridSpec
 from protocol.suite_compact import message_sizes
+from protocol.tools.compare import Case, Party
 from protocol.wire import Suite
 
 from .attacks.harness import FakeAutopilot
@@ -307,3 +308,25 @@ def test_edit_is_built_on_the_held_mission_and_keeps_the_current_item() -> None:
     assert [b.z - a.z for a, b in zip(items, new, strict=True)] == [0, 0, 10, 10, 0, 0]
     moved = run_simulated(main([h.replace(x=h.x + 100) for h in held]))[0]
     assert [e.kind for e in moved.events][-1] == "upload_failed"
+
+
+def test_a_failed_task_is_logged_and_recorded(caplog: pytest.LogCaptureFixture) -> None:
+    """A spawned task that raises is not lost: its traceback is logged and the companion
+    records ``task_failed`` (a replay with one fails)."""
+
+    async def main() -> Companion:
+        c, _ = alone(survey(4), Clock(1.0))
+
+        async def broken() -> None:
+            raise RuntimeError("boom")
+
+        c._spawn(broken())
+        await asyncio.sleep(0.01)
+        return c
+
+    with caplog.at_level(logging.ERROR, logger="companion"):
+        c = asyncio.run(main())
+    (event,) = [e for e in c.events if e.kind == "task_failed"]
+    assert "boom" in event.detail["error"]
+    assert any(r.exc_info and "boom" in str(r.exc_info[1]) for r in caplog.records)
+    assert not c._children  # and it is gone from the running ones

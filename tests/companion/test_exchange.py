@@ -15,12 +15,12 @@ from companion.link import (
     PeerAborted,
     run_simulated,
 )
-from companion.over_link import link_case
-from protocol.compare import Case, Party, run_case
+from companion.sim.over_link import link_case
 from protocol.errors import RemoteProtocolError
 from protocol.geometry import path_hits
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob, State
+from protocol.tools.compare import Case, Party, run_case
 from protocol.wire import Suite
 
 from .link.helpers import pair

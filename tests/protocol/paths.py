@@ -7,7 +7,7 @@ from typing import Any
 from protocol.geometry import Point
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob, Limits, State
-from protocol.loopback import Transcript, run_paths
+from protocol.tools.loopback import Transcript, run_paths
 from protocol.wire import Suite
 
 GRID = GridSpec(GridKind.PLANE, 99)

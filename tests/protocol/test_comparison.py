@@ -18,7 +18,7 @@ from protocol.comparison import (
     slots_per_ciphertext,
 )
 from protocol.errors import InsecureParametersError, LocalProtocolError, RemoteProtocolError
-from protocol.loopback import run_comparison
+from protocol.tools.loopback import run_comparison
 
 
 def parties(

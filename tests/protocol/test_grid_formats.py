@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from protocol.errors import InputRangeError, RemoteProtocolError
-from protocol.formats import InputFormatError, parse_paper_text
 from protocol.grid import GridKind, GridSpec, comparison_bits
+from protocol.tools.formats import InputFormatError, parse_paper_text
 
 LAT, LON = 473_977_420, 85_455_940
 
@@ -74,7 +74,7 @@ def waypoint(lat: float, lon: float, command: int = 16) -> dict[str, object]:
 def test_mission_files_are_left_to_the_companion(tmp_path: Path) -> None:
     """The ground path of a mission is the companion's one model (launch leg, loiters,
     DO_JUMP, RTL): this package refuses to guess it and says where to go."""
-    from protocol.compare import load_cases
+    from protocol.tools.compare import load_cases
 
     a, b = tmp_path / "a.plan", tmp_path / "b.plan"
     a.write_text(plan([waypoint(47.3985, 8.5456)]))

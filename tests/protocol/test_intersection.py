@@ -9,12 +9,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from protocol.bench_paths import DEFAULT_DATA
 from protocol.errors import InputRangeError, LocalProtocolError, RemoteProtocolError
 from protocol.geometry import Point, pad_path, path_hits
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob, Limits, State
-from protocol.loopback import run_paths
+from protocol.tools.bench_paths import DEFAULT_DATA
+from protocol.tools.loopback import run_paths
 from protocol.wire import Suite
 
 from .adversarial import ADVERSARIAL, R

@@ -10,8 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from protocol.errors import LocalProtocolError
-from protocol.loopback import run_millionaires
 from protocol.millionaire import Shape, digit_widths, digits
+from protocol.tools.loopback import run_millionaires
 
 
 def test_digit_widths() -> None:

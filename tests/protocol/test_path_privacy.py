@@ -21,7 +21,7 @@ import protocol.products as products_module
 from protocol.bitpack import unpack_bits
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob
-from protocol.loopback import run_paths
+from protocol.tools.loopback import run_paths
 from protocol.wire import HEADER_SIZE
 
 from .test_privacy import chi2_rejects, ks_rejects

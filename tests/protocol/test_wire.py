@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 from protocol.errors import RemoteProtocolError
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob, State
-from protocol.loopback import run_paths
 from protocol.suite_compact import Offer
+from protocol.tools.loopback import run_paths
 from protocol.wire import HEADER_SIZE, Hello, MsgType, Suite, frame, unframe
 
 from .paths import GRID

@@ -22,8 +22,8 @@ from companion.link import PROFILES, Channel, Clock, Impairments, LinkEndpoint, 
 from companion.link.frames import OVERHEAD, Flag, Frame, FrameType, decode_frame
 from companion.mission import MissionItem
 from companion.missionfile import read_plan
-from companion.replay_fleet import make_fleet
 from companion.runtime import Companion, CompanionSettings, Credentials
+from companion.sim.fleet import make_fleet
 from protocol.geometry import Point
 from protocol.grid import GridSpec
 from protocol.intersection import Alice

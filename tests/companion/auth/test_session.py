@@ -18,7 +18,7 @@ from companion.auth.session import (
     Responder,
     Route,
 )
-from companion.replay_fleet import make_fleet
+from companion.sim.fleet import make_fleet
 
 NOW = time.time()
 ROUTE = Route(1, 2, 4711)

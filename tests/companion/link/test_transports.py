@@ -15,10 +15,10 @@ from companion.exchange import run_alice, serve_bob
 from companion.link import PROFILES, Channel, Impairments, LinkEndpoint
 from companion.link.serial_port import SerialTransport
 from companion.link.udp import UdpHub, UdpTransport
-from protocol.compare import Party
 from protocol.geometry import path_hits
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob
+from protocol.tools.compare import Party
 from protocol.wire import Suite
 
 IDEAL = PROFILES["ideal"]

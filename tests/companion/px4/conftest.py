@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from companion.sim_px4 import Px4Build, Px4Error, find_build
+from companion.sim.px4 import Px4Build, Px4Error, find_build
 
 NO_BUILD = "PX4_SITL not set: PX4 SITL tests need a PX4 v1.16 SITL build (bin/px4, etc/)"
 

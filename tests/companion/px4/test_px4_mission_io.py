@@ -1,6 +1,6 @@
 """companion.autopilot (MAVSDK, onboard link) against real PX4 v1.16 SITL vehicles (SIH).
 
-The harness (:mod:`companion.sim_px4`, the GCS link) puts missions on the vehicle, flies it
+The harness (:mod:`companion.sim.px4`, the GCS link) puts missions on the vehicle, flies it
 and reads what it holds independently of the product.  PX4 reads items back as it stores
 them (frame 3 as 6, yaw -90 as 270, a LOITER_TIME's NaN param4 as 0): the product must
 verify an upload by what it means, not bit for bit.
@@ -24,7 +24,7 @@ from companion.mission import (
     MissionItem,
     ground_offset,
 )
-from companion.sim_px4 import HOME, MissionRefused, Px4Build, Px4Vehicle
+from companion.sim.px4 import HOME, MissionRefused, Px4Build, Px4Vehicle
 
 pytestmark = [
     pytest.mark.asyncio,

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from companion.replay import load_scenario, run_replay
-from companion.sim_px4 import Px4Build
+from companion.sim.px4 import Px4Build
+from companion.sim.replay import run_replay
+from companion.sim.scenario import load_scenario
 
 pytestmark = [pytest.mark.px4, pytest.mark.slow, pytest.mark.xdist_group("realtime")]
 

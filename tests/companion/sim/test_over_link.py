@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from companion.link import PROFILES
-from companion.over_link import bench_link, format_link, link_case
-from protocol.bench_paths import DEFAULT_DATA
-from protocol.compare import Party, load_cases
+from companion.sim.over_link import bench_link, format_link, link_case
+from protocol.tools.bench_paths import DEFAULT_DATA
+from protocol.tools.compare import Party, load_cases
 from protocol.wire import Suite
 
 
@@ -115,7 +115,7 @@ def test_compare_mission_files_as_they_are_flown(tmp_path: Path) -> None:
     launch leg (home -> first waypoint) and her RTL leg, which a positions-only reader misses."""
     from companion.missionfile import write_wpl
 
-    from .missions import item
+    from ..missions import item
 
     home = (47.3970, 8.5450, 488.0)
     alice = [item(0, 16, 47.3990, 8.5450, 30.0), item(1, 16, 47.3990, 8.5480), item(2, 20, frame=2)]

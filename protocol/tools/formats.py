@@ -14,8 +14,8 @@ import math
 import re
 from pathlib import Path
 
-from .errors import LocalProtocolError
-from .geometry import Point
+from ..errors import LocalProtocolError
+from ..geometry import Point
 
 _POINT = re.compile(r"\(\s*(-?\d+)\s*,\s*(-?\d+)\s*\)")
 _LINE = re.compile(r"^(\s*\(\s*-?\d+\s*,\s*-?\d+\s*\)\s*)+$")

@@ -16,12 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .formats import InputFormatError, parse_paper_text, read_text
-from .geometry import Point, path_hits
-from .grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
-from .intersection import Alice, Bob, BobKeys, Limits
-from .loopback import run_ot_setup, run_paths
-from .ot.setup import (
+from ..geometry import Point, path_hits
+from ..grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
+from ..intersection import Alice, Bob, BobKeys, Limits
+from ..ot.setup import (
     DEFAULT_BLOCK_BITS,
     DEFAULT_SECURITY,
     ChooserSetup,
@@ -29,7 +27,9 @@ from .ot.setup import (
     describe,
     split_blocks,
 )
-from .wire import Suite
+from ..wire import Suite
+from .formats import InputFormatError, parse_paper_text, read_text
+from .loopback import run_ot_setup, run_paths
 
 SUITES = {"compact": Suite.COMPACT, "paper": Suite.PAPER}
 

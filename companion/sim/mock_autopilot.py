@@ -23,10 +23,9 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from . import mock_links as wire
-from .autopilots import personality
-from .flightpath import DO_JUMP
-from .mission import (
+from ..autopilots import personality
+from ..flightpath import DO_JUMP
+from ..mission import (
     EARTH_RADIUS_M,
     FRAMES_AMSL,
     NAV_LAND,
@@ -36,6 +35,7 @@ from .mission import (
     MissionItem,
     ground_offset,
 )
+from . import mock_links as wire
 from .mock_links import PX4_BIND, PX4_GCS_BIND, PX4_GCS_SEND, PX4_SEND, Faults, Link
 from .mock_missions import MissionServer, item_message
 

@@ -16,16 +16,18 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..geometry import Point, path_hits
+from ..grid import GridKind, GridSpec
+from ..intersection import Alice, Bob
+from ..ot.setup import DEFAULT_SECURITY
+from ..wire import Suite
 from .compare import Case, Party, describe_once, load_cases, params_of, run_case
 from .formats import InputFormatError
-from .geometry import Point, path_hits
-from .grid import GridKind, GridSpec
-from .intersection import Alice, Bob
 from .loopback import run_paths
-from .ot.setup import DEFAULT_SECURITY
-from .wire import Suite
 
-DEFAULT_DATA = Path(__file__).resolve().parent / "data" / "anchor"  # the paper's, verbatim (MIT)
+DEFAULT_DATA = (
+    Path(__file__).resolve().parents[1] / "data" / "anchor"
+)  # the paper's, verbatim (MIT)
 
 # The paper's published figures and its code as measured here (quoted from the field notes).
 PAPER_PUBLISHED = {"time_s": 4.407, "bytes": 4634, "note": "bytes are JVM object sizes"}

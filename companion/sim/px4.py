@@ -35,7 +35,7 @@ from typing import Any, cast
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from .mission import MissionItem
+from ..mission import MissionItem
 from .mock_links import parse_datagram
 from .mock_missions import item_from, item_message
 

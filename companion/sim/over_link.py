@@ -24,19 +24,19 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from protocol.bench_paths import DEFAULT_DATA, random_path
-from protocol.compare import Case, Party, compare, load_cases
-from protocol.formats import InputFormatError
 from protocol.geometry import path_hits
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Limits
+from protocol.tools.bench_paths import DEFAULT_DATA, random_path
+from protocol.tools.compare import Case, Party, compare, load_cases
+from protocol.tools.formats import InputFormatError
 from protocol.wire import Suite
 
-from .auth.session import Identity, Init, Initiator, Responder, Route
-from .beacon_budget import beacon_costs
-from .exchange import RunReport, run_alice, serve_bob
-from .flightpath import flight_path
-from .link import (
+from ..auth.session import Identity, Init, Initiator, Responder, Route
+from ..beacon_budget import beacon_costs
+from ..exchange import RunReport, run_alice, serve_bob
+from ..flightpath import flight_path
+from ..link import (
     PROFILES,
     Channel,
     Clock,
@@ -48,10 +48,10 @@ from .link import (
     profile,
     run_simulated,
 )
-from .link.frames import OVERHEAD
-from .mission import MissionError
-from .missionfile import read_mission_file
-from .replay_fleet import make_fleet
+from ..link.frames import OVERHEAD
+from ..mission import MissionError
+from ..missionfile import read_mission_file
+from .fleet import make_fleet
 
 ALICE_NODE, BOB_NODE = 1, 2
 
@@ -382,7 +382,7 @@ def compare_over_link(
 
 def radio_demo(profiles: Sequence[str] = ("eu868-sf7", "us915-sf7"), loss: float = 0.1) -> int:
     """The demo's two missions once more, through the simulated radio (``make demo``)."""
-    from protocol.demo import ALICE_MISSION, BOB_MISSION, HOME_LAT, HOME_LON
+    from protocol.tools.demo import ALICE_MISSION, BOB_MISSION, HOME_LAT, HOME_LON
 
     grid = GridSpec.geo(HOME_LAT, HOME_LON, radius_m=2000)
     case = Case(grid.project_path(ALICE_MISSION), BOB_MISSION, grid, bob_geographic=True)

@@ -9,7 +9,7 @@ and GeoJSON (QGIS, geojson.io, any web map).
   the segments its comparisons flagged, plus each pair's closest approach;
 - ``encounter.geojson``: the same as GeoJSON features (coordinates lon, lat, alt AMSL).
 
-Each file is written whole or not at all (:func:`protocol.cli.write_atomic`).
+Each file is written whole or not at all (:func:`protocol.tools.cli.write_atomic`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from xml.etree import ElementTree as ET
 
-from protocol import cli
+from protocol.tools import cli
 
 if TYPE_CHECKING:
     from .replay import Replay
@@ -44,7 +44,7 @@ def _planned(points: Sequence[tuple[int, int]], alt: float) -> list[tuple[float,
 
 
 def features(replay: Replay) -> list[dict[str, Any]]:
-    """GeoJSON features of a :class:`~companion.replay.Replay`."""
+    """GeoJSON features of a :class:`~companion.sim.replay.Replay`."""
     report, tracks = replay.report, replay.tracks
     out: list[dict[str, Any]] = []
 

@@ -17,15 +17,15 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from . import secp256k1 as ec
-from .comparison import ComparisonAlice, ComparisonBob, pack_differences
-from .dgk import DGKPrivateKey, DGKPublicKey
+from .. import secp256k1 as ec
+from ..comparison import ComparisonAlice, ComparisonBob, pack_differences
+from ..dgk import DGKPrivateKey, DGKPublicKey
+from ..millionaire import DEFAULT_DIGIT_BITS, Shape
+from ..ot.extension import chooser_extend, holder_extend
+from ..ot.setup import DEFAULT_BLOCKS, ChooserSetup, HolderSetup, describe
+from ..paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
+from ..params import SecurityParameters
 from .loopback import Transcript, run_comparison, run_millionaires, run_ot_setup
-from .millionaire import DEFAULT_DIGIT_BITS, Shape
-from .ot.extension import chooser_extend, holder_extend
-from .ot.setup import DEFAULT_BLOCKS, ChooserSetup, HolderSetup, describe
-from .paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
-from .params import SecurityParameters
 
 Row = dict[str, Any]
 

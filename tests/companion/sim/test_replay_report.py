@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from companion.replay import format_report, notes, problems
+from companion.sim.report import format_report, notes, problems
 
 
 def _drone(ident: int, **changes: Any) -> dict[str, Any]:

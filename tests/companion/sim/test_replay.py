@@ -16,16 +16,12 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from companion.failsafe import Action
-from companion.mock_autopilot import Faults
-from companion.replay import (
-    Scenario,
-    ScenarioError,
-    load_scenario,
-    run_replay,
-)
-from companion.replay_vehicles import RESOLVED_TOLERANCE_M
+from companion.sim.mock_autopilot import Faults
+from companion.sim.replay import run_replay
+from companion.sim.scenario import Scenario, ScenarioError, load_scenario
+from companion.sim.vehicles import RESOLVED_TOLERANCE_M
 
-SCENARIOS = Path(__file__).resolve().parents[2] / "sitl_configs" / "scenarios"
+SCENARIOS = Path(__file__).resolve().parents[3] / "sitl_configs" / "scenarios"
 # real time, scaled: one replay at a time under ``make test``'s two workers
 pytestmark = pytest.mark.xdist_group("realtime")
 

@@ -12,9 +12,9 @@ import contextlib
 import time
 from typing import Protocol
 
-from .mission import MissionItem
+from ..mission import MissionItem
 from .mock_autopilot import Faults, FlightModel, MockAutopilot
-from .sim_px4 import Px4Build, Px4Error, Px4Vehicle
+from .px4 import Px4Build, Px4Error, Px4Vehicle
 
 Track = list[tuple[float, float, float, float]]
 RESOLVED_TOLERANCE_M = 0.5  # two mocks: a pair is resolved at the offset minus this

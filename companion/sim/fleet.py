@@ -8,11 +8,11 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from .auth.certificate import Certificate
-from .auth.keys import SigningKey
-from .auth.session import Identity
-from .auth.trust import Operator, TrustStore, UnknownPeers
-from .runtime import Credentials
+from ..auth.certificate import Certificate
+from ..auth.keys import SigningKey
+from ..auth.session import Identity
+from ..auth.trust import Operator, TrustStore, UnknownPeers
+from ..runtime import Credentials
 
 VALID_S = 14 * 86400  # long enough for the slowest replay's simulated hours
 

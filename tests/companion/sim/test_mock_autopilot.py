@@ -18,11 +18,11 @@ from companion.autopilot import Autopilot
 from companion.autopilots import PX4
 from companion.flightpath import DO_JUMP, flight_order
 from companion.mission import MissionItem
-from companion.mock_autopilot import FlightModel, MockAutopilot, item_message
-from companion.mock_missions import item_from
-from companion.replay import free_udp_port as free_port
+from companion.sim.mock_autopilot import FlightModel, MockAutopilot, item_message
+from companion.sim.mock_missions import item_from
+from companion.sim.replay import free_udp_port as free_port
 
-from .missions import HOME, item
+from ..missions import HOME, item
 
 pytestmark = pytest.mark.asyncio
 

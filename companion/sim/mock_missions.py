@@ -22,9 +22,9 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from .autopilots import Firmware, Personality
-from .flightpath import DO_JUMP, jump_target
-from .mission import FRAMES_GLOBAL, MissionError, MissionItem
+from ..autopilots import Firmware, Personality
+from ..flightpath import DO_JUMP, jump_target
+from ..mission import FRAMES_GLOBAL, MissionError, MissionItem
 from .mock_links import Faults, Link
 
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
