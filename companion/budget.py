@@ -15,9 +15,10 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
+from .roles import Role
 from .state import StateStore
 
-ALICE, BOB = "alice", "bob"
+ALICE, BOB = Role.ALICE, Role.BOB
 
 
 class Scope(enum.Enum):
@@ -50,7 +51,7 @@ class RunLedger:
         self.store, self.limits = store, limits
 
     def check(
-        self, drone: bytes, operator: bytes, operator_limit: int, now: float, role: str = BOB
+        self, drone: bytes, operator: bytes, operator_limit: int, now: float, role: Role = BOB
     ) -> None:
         """Raise :class:`BudgetExceeded` if one more run in ``role`` with ``drone`` (of
         ``operator``, whose drones may ask ``operator_limit`` runs per window together) is
@@ -68,7 +69,7 @@ class RunLedger:
                 raise BudgetExceeded(scope, limit, self.limits.window_s)
 
     def admit(
-        self, drone: bytes, operator: bytes, operator_limit: int, now: float, role: str = BOB
+        self, drone: bytes, operator: bytes, operator_limit: int, now: float, role: Role = BOB
     ) -> int:
         """Check, then count one run; its ticket, for :meth:`refund`."""
         self.check(drone, operator, operator_limit, now, role)

@@ -33,6 +33,7 @@ from .link.arq import LinkError, LinkTimeout, PeerAborted
 from .link.clock import VirtualTimeLoop
 from .link.endpoint import LinkEndpoint
 from .link.frames import AbortCode
+from .roles import Role
 
 T = TypeVar("T")
 # Protocol steps get threads of their own: MAVSDK's blocking calls and streams occupy the
@@ -53,7 +54,7 @@ class RunReport:
     """What one party saw of one run.  ``bytes_sent`` counts what went to the link;
     ``auth_bytes_sent`` the part of it authentication added (key exchange, tags)."""
 
-    role: str
+    role: Role
     peer: int
     session: int
     started: float
@@ -166,7 +167,7 @@ async def run_alice(
     what it signs); ``check_keys(boot, public_keys)`` says whether what Bob's answer carries
     (his per-start nonce and, paper suite, his public keys) is what his beacons announced."""
     session = endpoint.open(peer)
-    report = RunReport("alice", peer, session, endpoint.clock.now())
+    report = RunReport(Role.ALICE, peer, session, endpoint.clock.now())
     party = _Party(endpoint, peer, session, alice, report, charge_cpu)
     channel = secure(session) if secure is not None else None
 
@@ -216,7 +217,7 @@ async def serve_bob(
     taken from it already and is passed as ``first`` -- with ``secure``, the HELLO inside the
     request the :class:`Responder` verified.  A hello naming an OT setup Bob does not hold
     is answered with a signed refusal (the peer starts a fresh setup)."""
-    report = RunReport("bob", peer, session, endpoint.clock.now())
+    report = RunReport(Role.BOB, peer, session, endpoint.clock.now())
     party = _Party(endpoint, peer, session, bob, report, charge_cpu)
     pending = [first] if first is not None else []
 

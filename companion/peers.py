@@ -17,6 +17,7 @@ from protocol.intersection import MAX_SEGMENTS, Limits
 
 from .beacon import Beacon
 from .mission import ground_offset
+from .roles import Role
 
 
 def distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
@@ -81,7 +82,7 @@ class Peer:
     heard_at: float
     identity: bytes = b""  # the certified drone's fingerprint (companion.neighbours)
     speed_m_s: float = 0.0
-    role: str | None = None  # "alice" or "bob" once this pair has met: roles then stay
+    role: Role | None = None  # once this pair has met: roles then stay
     compared: tuple[int, int] | None = None  # (peer's, our) mission versions of the last run
     next_try: float = 0.0
     conflicts: set[int] = field(default_factory=set)  # our segments that meet its path

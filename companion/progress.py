@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 from . import logs
 from .link.endpoint import LinkEndpoint, LinkStats
+from .roles import Role
 
 log = logging.getLogger("companion.progress")
 EVERY_S = 15.0  # link seconds between progress lines
@@ -51,14 +52,14 @@ def _kb(n: int) -> str:
 
 
 class RunProgress:
-    """Logs the progress of one run with ``peer`` (``role``: alice or bob)."""
+    """Logs the progress of one run with ``peer`` (as ``role``)."""
 
     def __init__(
         self,
         node: int,
         endpoint: LinkEndpoint,
         peer: int,
-        role: str,
+        role: Role,
         *,
         expected_bytes: Callable[[], int | None] = lambda: None,
         ends_at: Callable[[], float | None] = lambda: None,

@@ -64,6 +64,7 @@ from .beacon import (
 )
 from .beacon_budget import beacon_interval
 from .budget import ALICE, BOB, BudgetExceeded, RunLedger, RunLimits
+from .events import WARNINGS, Event, EventKind
 from .exchange import PeerRefused, run_alice, serve_bob
 from .failsafe import Action, FailsafeSettings, at_risk, run_seconds, too_late
 from .flightpath import FlightPath, flight_path
@@ -77,6 +78,7 @@ from .peers import FRESH_S, Peer, distance_m, near_cut, time_to_meet
 from .planner import OffsetSettings, PlannerError, fixed_segments, plan_offsets
 from .progress import RunProgress
 from .radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
+from .roles import Role
 from .state import OWN, StateStore
 
 log = logging.getLogger("companion")
@@ -92,21 +94,6 @@ GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet
 SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one),
 SIGNED_EVERY = 30  # and at most every 30th beacon (a duty cycle stretches beacons to minutes)
 ASKED_AGAIN = 0.5  # asked for, a certificate or signed beacon at most every half interval
-# events that mean something went wrong or a drone acted without a result: logged as warnings
-WARNING_EVENTS = frozenset(
-    {
-        "answer_failed",
-        "hold_failed",
-        "intruder",
-        "mission_invalid",
-        "plan_failed",
-        "precautionary",
-        "resume_failed",
-        "run_failed",
-        "task_failed",
-        "upload_failed",
-    }
-)
 AUTOPILOT_SILENT_S = 5.0  # no position from the autopilot this long (real s): a warning
 ALERT_EVERY_S = 60.0  # an untrusted drone is reported at most this often (policy "alert")
 
@@ -142,15 +129,6 @@ class Credentials:
     identity: Identity
     trust: TrustStore
     state_dir: Path
-
-
-@dataclass
-class Event:
-    """One line of the companion's history (for logs and replay reports)."""
-
-    t: float
-    kind: str
-    detail: dict[str, Any]
 
 
 def mission_version(path: FlightPath) -> int:
@@ -260,12 +238,12 @@ class Companion:
 
     # ------------------------------------------------------------------ lifecycle
 
-    def record(self, kind: str, **detail: Any) -> None:
+    def record(self, kind: EventKind, **detail: Any) -> None:
         """An event at link seconds since :attr:`epoch` (the start, or the replay's zero),
         logged as ``key=value`` text and as a JSON line (:mod:`companion.logs`)."""
         t = self.clock.now() - self.epoch
         self.events.append(Event(t, kind, detail))
-        level = logging.WARNING if kind in WARNING_EVENTS else logging.INFO
+        level = logging.WARNING if kind in WARNINGS else logging.INFO
         text = f"node {self.settings.node}: {kind.replace('_', ' ')}"
         logs.event(log, level, kind, text, t_s=round(t, 1), **detail)
 
@@ -279,9 +257,9 @@ class Companion:
         try:
             self.path = flight_path(self.mission, home, ardupilot=self.settings.ardupilot)
         except MissionError as exc:  # e.g. a DO_JUMP to nowhere: fly, but compare nothing
-            self.record("mission_invalid", error=str(exc))
+            self.record(EventKind.MISSION_INVALID, error=str(exc))
         self.record(
-            "mission",
+            EventKind.MISSION,
             items=len(self.mission),
             segments=self.path.segments,
             home=self.home is not None or self.settings.ardupilot,
@@ -315,7 +293,7 @@ class Companion:
         exc = task.exception()
         if exc is not None:
             log.error("node %d: task %s failed", self.settings.node, task.get_name(), exc_info=exc)
-            self.record("task_failed", task=task.get_name(), error=repr(exc))
+            self.record(EventKind.TASK_FAILED, task=task.get_name(), error=repr(exc))
 
     async def stop(self) -> None:
         for task in [*self._tasks, *self._children]:
@@ -564,9 +542,12 @@ class Companion:
         if peer is None:
             peer = self.peers[src] = Peer(src, beacon, now, identity=neighbour.fingerprint)
             self.record(
-                "peer", peer=src, on_ground=beacon.on_ground, drone=neighbour.fingerprint.hex(),
+                EventKind.PEER,
+                peer=src,
+                on_ground=beacon.on_ground,
+                drone=neighbour.fingerprint.hex(),
                 operator=neighbour.operator.name,
-            )  # fmt: skip
+            )
             self._beacon_now.set()  # let it hear us without waiting an interval
         elif hearing.new_keys:
             self._drop_setups(src)  # it restarted (a new beacon key): they are gone on its side
@@ -604,7 +585,9 @@ class Companion:
         drone = hearing.cert.fingerprint
         if drone not in self._ignored:
             self._ignored.add(drone)
-            self.record("untrusted", peer=hearing.node, drone=drone.hex(), reason=hearing.reason)
+            self.record(
+                EventKind.UNTRUSTED, peer=hearing.node, drone=drone.hex(), reason=hearing.reason
+            )
         if self.neighbours.trust.unknown is not UnknownPeers.ALERT or hearing.beacon is None:
             return
         now = self.clock.now()
@@ -613,7 +596,7 @@ class Companion:
             b = hearing.beacon
             distance = distance_m(self.position[:2], (b.lat, b.lon))
             self.record(
-                "intruder", peer=hearing.node, drone=drone.hex(), lat=b.lat, lon=b.lon,
+                EventKind.INTRUDER, peer=hearing.node, drone=drone.hex(), lat=b.lat, lon=b.lon,
                 alt_m_amsl=b.alt_m, distance_m=round(distance),
             )  # fmt: skip
 
@@ -628,7 +611,7 @@ class Companion:
         """We are Alice for this peer, it is in range, and its paths are not compared yet."""
         me = (self.on_ground, self.settings.node)
         them = (peer.beacon.on_ground, peer.node)
-        if peer.role == "bob":
+        if peer.role is Role.BOB:
             return False
         if peer.role is None and alice_of(me, them) != self.settings.node:
             return False
@@ -713,7 +696,7 @@ class Companion:
                 raise
             except Exception as exc:  # nothing may stop the companion
                 log.exception("node %d: comparison failed", self.settings.node)
-                self.record("run_failed", peer=peer.node, error=f"internal: {exc!r}")
+                self.record(EventKind.RUN_FAILED, peer=peer.node, error=f"internal: {exc!r}")
                 done = False
             if done:
                 peer.plan.pop(0)
@@ -827,7 +810,7 @@ class Companion:
                 peer.identity, op.key.fingerprint, op.max_runs_per_hour, self.clock.wall(), ALICE
             )
         except BudgetExceeded as exc:
-            self.record("budget", peer=peer.node, error=str(exc))
+            self.record(EventKind.BUDGET, peer=peer.node, error=str(exc))
             return False
         done = await self._compare(peer, phase, horizon, start, path, neighbour)
         if not done:
@@ -844,7 +827,7 @@ class Companion:
         neighbour: Neighbour,
     ) -> bool:
         """The run itself (a fresh OT setup again if the peer lost ours)."""
-        peer.role = "alice"
+        peer.role = Role.ALICE
         for attempt in range(2):
             grid = self._grid(path)
             setup = self.holder_setups.get(peer.node)
@@ -858,14 +841,14 @@ class Companion:
                     ot_security=self.settings.ot_security,
                 )
             except ProtocolError as exc:
-                self.record("run_failed", peer=peer.node, phase=phase, error=str(exc))
+                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=str(exc))
                 return False
             # Bob's size is unknown until his first reply: act at once only if even the
             # smallest Bob makes the result too late; the watch re-checks with his real size.
             needed = self._seconds(alice.m, grid, fresh=setup is None, n=1)
             meet = self._urgency(peer)
             self.record(
-                "run_started",
+                EventKind.RUN_STARTED,
                 peer=peer.node,
                 phase=phase,
                 segments=alice.m,
@@ -886,7 +869,7 @@ class Companion:
                 self.settings.node,
                 self.endpoint,
                 peer.node,
-                "alice",
+                Role.ALICE,
                 expected_bytes=functools.partial(self._run_bytes, alice, grid, fresh=setup is None),
                 ends_at=lambda: None if self._running is None else self._running[1],
             )
@@ -906,21 +889,23 @@ class Companion:
             except PeerRefused as exc:
                 if exc.code is Refusal.UNKNOWN_SETUP and attempt == 0:
                     self.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
-                    self.record("setup_renewed", peer=peer.node)
+                    self.record(EventKind.SETUP_RENEWED, peer=peer.node)
                     continue
                 if exc.code is Refusal.ROLE:
-                    peer.role = "bob"  # the peer already resolved this pair as Alice
-                    self.record("yielded", peer=peer.node, reason="the peer is Alice")
+                    peer.role = Role.BOB  # the peer already resolved this pair as Alice
+                    self.record(EventKind.YIELDED, peer=peer.node, reason="the peer is Alice")
                     return False
                 if exc.code is Refusal.UNKNOWN_PEER:
                     self._cert_now.set()  # it lacks our certificate: beacon it
-                self.record("run_failed", peer=peer.node, phase=phase, refused=exc.code.name)
+                self.record(
+                    EventKind.RUN_FAILED, peer=peer.node, phase=phase, refused=exc.code.name
+                )
                 return False
             except AuthenticationError as exc:
-                self.record("run_failed", peer=peer.node, phase=phase, auth=str(exc))
+                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, auth=str(exc))
                 return False
             except (ProtocolError, LinkError, ValueError) as exc:
-                self.record("run_failed", peer=peer.node, phase=phase, error=str(exc))
+                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=str(exc))
                 return False
             finally:
                 self._sessions -= 1
@@ -938,7 +923,7 @@ class Companion:
         peer.conflicts = (peer.conflicts - covered) | flagged
         peer.covered |= covered
         self.record(
-            "result",
+            EventKind.RESULT,
             peer=peer.node,
             phase=phase,
             hits=report.hits,
@@ -1057,7 +1042,7 @@ class Companion:
         if not risky:
             return
         self.record(
-            "precautionary",
+            EventKind.PRECAUTIONARY,
             peer=peer.node,
             action=settings.action.value,
             segments=risky,
@@ -1087,9 +1072,9 @@ class Companion:
             return
         try:
             await self.autopilot.pause()
-            self.record("hold", peer=peer, before_segment=segment)
+            self.record(EventKind.HOLD, peer=peer, before_segment=segment)
         except AutopilotError as exc:
-            self.record("hold_failed", peer=peer, error=str(exc))
+            self.record(EventKind.HOLD_FAILED, peer=peer, error=str(exc))
 
     async def _release(self, peer: Peer) -> None:
         """The result is in: precautions for this peer end."""
@@ -1099,9 +1084,9 @@ class Companion:
             if not self._holding:
                 try:
                     await self.autopilot.resume()
-                    self.record("resumed", peer=peer.node)
+                    self.record(EventKind.RESUMED, peer=peer.node)
                 except AutopilotError as exc:
-                    self.record("resume_failed", peer=peer.node, error=str(exc))
+                    self.record(EventKind.RESUME_FAILED, peer=peer.node, error=str(exc))
 
     async def _replan(self, why: str) -> None:
         """Upload the altitude levels the conflicts and precautions call for, if they changed."""
@@ -1116,11 +1101,11 @@ class Companion:
             try:
                 planned = plan_offsets(self.original, levels, self.settings.offset, path=self.path)
             except PlannerError as exc:
-                self.record("plan_failed", error=str(exc))
+                self.record(EventKind.PLAN_FAILED, error=str(exc))
                 return
             fixed = fixed_segments(self.path, levels)
             if fixed:  # e.g. the launch leg to a take-off point: nothing there may move
-                self.record("fixed_segments", segments=fixed, why=why)
+                self.record(EventKind.FIXED_SEGMENTS, segments=fixed, why=why)
             try:
                 # The edit is built on what the vehicle holds now and keeps the item it is
                 # flying: PX4 restarts a mission at the item an upload marks current.
@@ -1137,7 +1122,7 @@ class Companion:
                 ]
                 await self.autopilot.replace_mission(new, held)
             except (AutopilotError, MissionError) as exc:
-                self.record("upload_failed", error=str(exc))
+                self.record(EventKind.UPLOAD_FAILED, error=str(exc))
                 return
             announce = levels_mask(levels) != levels_mask(self.levels)
             self.mission, self.levels = new, levels
@@ -1145,7 +1130,7 @@ class Companion:
                 self._beacon_now.set()  # minutes (a duty-cycled beacon interval)
             self.flagged = {k for p in self.peers.values() for k in p.conflicts}
             self.record(
-                "uploaded",
+                EventKind.UPLOADED,
                 flagged=sorted(levels),
                 levels={str(k): v for k, v in sorted(levels.items())},
                 verified=True,
@@ -1186,7 +1171,7 @@ class Companion:
                 self._sessions += 1
                 bob = Bob(self._bob_path, keys=self.bob_keys, setups=setups, geographic=True)
                 try:
-                    with RunProgress(self.settings.node, self.endpoint, peer, "bob"):
+                    with RunProgress(self.settings.node, self.endpoint, peer, Role.BOB):
                         report = await serve_bob(
                             self.endpoint,
                             peer,
@@ -1202,14 +1187,14 @@ class Companion:
                     if bob.state is not State.DONE:  # no last message: Alice learnt nothing
                         self.ledger.refund(ticket)
         except AuthenticationError as exc:
-            self.record("answer_failed", peer=peer, auth=str(exc))
+            self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
             return
         except (ProtocolError, LinkError, ValueError) as exc:
-            self.record("answer_failed", peer=peer, error=str(exc))
+            self.record(EventKind.ANSWER_FAILED, peer=peer, error=str(exc))
             return
         except Exception as exc:  # nothing may stop the companion
             log.exception("node %d: answering %d failed", self.settings.node, peer)
-            self.record("answer_failed", peer=peer, error=f"internal: {exc!r}")
+            self.record(EventKind.ANSWER_FAILED, peer=peer, error=f"internal: {exc!r}")
             return
         finally:
             self._answering -= 1
@@ -1217,10 +1202,13 @@ class Companion:
             while len(setups) > SETUPS_PER_PEER:  # the oldest go first
                 setups.pop(next(iter(setups)))
         if report.refused is not None:
-            self.record("refused", peer=peer, reason=report.refused.name)
+            self.record(EventKind.REFUSED, peer=peer, reason=report.refused.name)
             return
         self.record(
-            "answered", peer=peer, bytes=report.bytes_sent, auth_bytes=report.auth_bytes_sent
+            EventKind.ANSWERED,
+            peer=peer,
+            bytes=report.bytes_sent,
+            auth_bytes=report.auth_bytes_sent,
         )
 
     async def _admit(
@@ -1234,7 +1222,7 @@ class Companion:
             init = Init.parse(request)
         except AuthenticationError as exc:
             self.endpoint.abort(peer, session, AbortCode.AUTH)
-            self.record("answer_failed", peer=peer, auth=str(exc))
+            self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
             return None
         responder = Responder(self.identity, init, Route(peer, self.settings.node, session))
         neighbour = self.neighbours.get(peer)
@@ -1264,21 +1252,21 @@ class Companion:
                 raise AuthenticationError("a request answered before (a replay)")
         except AuthenticationError as exc:
             self.endpoint.abort(peer, session, AbortCode.AUTH)
-            self.record("answer_failed", peer=peer, auth=str(exc))
+            self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
             return None
         try:
             hello = Hello.from_bytes(init.hello)
         except ProtocolError as exc:
             self.endpoint.abort(peer, session, AbortCode.PROTOCOL)
-            self.record("answer_failed", peer=peer, error=str(exc))
+            self.record(EventKind.ANSWER_FAILED, peer=peer, error=str(exc))
             return None
-        if known.role == "alice":
+        if known.role is Role.ALICE:
             if self.settings.node < peer:
                 # Both took the pair as Alice (their views of who was on the ground crossed):
                 # exactly one of a pair adjusts -- the lower node id keeps the role.
                 await self._refuse(peer, session, responder, Refusal.ROLE)
                 return None
-            self.record("yielded", peer=peer, reason="the peer has the lower node id")
+            self.record(EventKind.YIELDED, peer=peer, reason="the peer has the lower node id")
         operator = neighbour.operator
         allowed = min(operator.max_segments, 1 << min(known.beacon.size_class, MAX_SIZE_CLASS))
         if hello.m > allowed:  # more than its beacon announced or its operator allows
@@ -1289,15 +1277,15 @@ class Companion:
                 known.identity, operator.key.fingerprint, operator.max_runs_per_hour, wall, BOB
             )
         except BudgetExceeded as exc:
-            self.record("budget", peer=peer, error=str(exc))
+            self.record(EventKind.BUDGET, peer=peer, error=str(exc))
             await self._refuse(peer, session, responder, Refusal.BUDGET)
             return None
-        known.role = "bob"
+        known.role = Role.BOB
         known.conflicts.clear()  # as Bob we do not adjust for this peer
         return responder, hello, ticket
 
     async def _refuse(self, peer: int, session: int, responder: Responder, code: Refusal) -> None:
-        self.record("refused", peer=peer, reason=code.name)
+        self.record(EventKind.REFUSED, peer=peer, reason=code.name)
         try:
             await self.endpoint.send(peer, session, responder.refuse(code))
         except LinkError:

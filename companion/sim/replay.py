@@ -25,6 +25,7 @@ from typing import Any
 
 from ..autopilot import Autopilot
 from ..autopilots import personality
+from ..events import Event, EventKind
 from ..failsafe import FailsafeSettings
 from ..link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
 from ..planner import OffsetSettings
@@ -57,6 +58,40 @@ class Tracks:
 class Replay:
     report: dict[str, Any]  # what --json prints
     tracks: Tracks
+
+
+TOLD = frozenset(
+    {
+        EventKind.RUN_STARTED,
+        EventKind.RESULT,
+        EventKind.RUN_FAILED,
+        EventKind.UPLOADED,
+        EventKind.PRECAUTIONARY,
+        EventKind.TASK_FAILED,
+        EventKind.PLAN_FAILED,
+        EventKind.UPLOAD_FAILED,
+    }
+)
+
+
+def _story(event: Event) -> str:
+    """One companion event as a progress line of the replay."""
+    d = event.detail
+    if event.kind is EventKind.RUN_STARTED:
+        return (
+            f"{d['phase']} run with {d['peer']} started ({d['segments']} segments, about "
+            f"{d['estimate_s']:.0f} s)"
+        )
+    if event.kind is EventKind.RESULT:
+        flagged = ", ".join(map(str, d["flagged"])) or "none"
+        return (
+            f"result of the {d['phase']} run with {d['peer']}: segments {flagged} cross "
+            f"({d['bytes']} B sent, {d['run_s']:.0f} s)"
+        )
+    if event.kind is EventKind.UPLOADED:
+        return "edit uploaded and verified"
+    details = ", ".join(f"{k}={v}" for k, v in d.items())
+    return f"{event.kind.replace('_', ' ')} ({details})"
 
 
 def free_udp_port() -> int:
@@ -169,8 +204,14 @@ async def run_replay(
         for companion in companions.values():
             companion.epoch = clock.now()
         started: set[int] = set()
+        told = {d.id: 0 for d in scenario.drones}  # companion events already told
         while True:
             sim = (time.monotonic() - origin) * ts
+            for ident, companion in companions.items():
+                for event in companion.events[told[ident] :]:
+                    if event.kind in TOLD:
+                        say(f"t={event.t:.0f} s: drone {ident}: {_story(event)}")
+                told[ident] = len(companion.events)
             for d in scenario.drones:
                 gone = companions.get(d.id)
                 if d.companion_stop_s is not None and sim >= d.companion_stop_s and gone:

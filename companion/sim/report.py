@@ -15,6 +15,8 @@ from protocol.grid import GridSpec
 
 from ..autopilots import personality
 from ..beacon import UNAUTHENTICATED_SIZE
+from ..events import FAILURES, RUN_ENDS
+from ..events import EventKind as K
 from ..mission import MissionItem, ground_offset, point_as_segment
 from ..runtime import Companion
 from .scenario import Scenario
@@ -34,15 +36,17 @@ def enu(a: tuple[float, float, float], ref: tuple[float, float]) -> tuple[float,
     return (*ground_offset(ref[0], ref[1], a[0], a[1]), a[2])
 
 
-TIMELINE = (
-    "run_started",
-    "result",
-    "run_failed",
-    "uploaded",
-    "precautionary",
-    "hold",
-    "resumed",
-    "setup_renewed",
+TIMELINE = frozenset(
+    {
+        K.RUN_STARTED,
+        K.RESULT,
+        K.RUN_FAILED,
+        K.UPLOADED,
+        K.PRECAUTIONARY,
+        K.HOLD,
+        K.RESUMED,
+        K.SETUP_RENEWED,
+    }
 )
 
 
@@ -72,18 +76,18 @@ def _acted(c: Companion, peer: int, until: float) -> bool:
     """Did this companion act on its pair with ``peer`` before ``until``: a precautionary
     action for it, or a verified edit that flies a segment a result flagged for it higher?"""
     if any(
-        e.kind == "precautionary" and e.detail.get("peer") == peer and e.t <= until
+        e.kind is K.PRECAUTIONARY and e.detail.get("peer") == peer and e.t <= until
         for e in c.events
     ):
         return True
     flagged = {
         k
         for e in c.events
-        if e.kind == "result" and e.detail.get("peer") == peer and e.t <= until
+        if e.kind is K.RESULT and e.detail.get("peer") == peer and e.t <= until
         for k in e.detail.get("flagged", [])
     }
     return any(
-        e.kind == "uploaded"
+        e.kind is K.UPLOADED
         and e.t <= until
         and e.detail.get("verified")
         and flagged & {int(k) for k in e.detail.get("levels", {})}
@@ -120,12 +124,12 @@ def build_report(
         flagged = sorted(c.flagged)
         false_alarms += sum(1 for k in flagged if k < len(plain) and not plain[k])
         precautionary = [
-            {"t_s": round(e.t, 1), **e.detail} for e in c.events if e.kind == "precautionary"
+            {"t_s": round(e.t, 1), **e.detail} for e in c.events if e.kind is K.PRECAUTIONARY
         ]
         precautions += len(precautionary)
         stats = c.endpoint.stats
         run_auth = sum(
-            e.detail.get("auth_bytes", 0) for e in c.events if e.kind in ("result", "answered")
+            e.detail.get("auth_bytes", 0) for e in c.events if e.kind in (K.RESULT, K.ANSWERED)
         )
         drones.append(
             {
@@ -137,11 +141,11 @@ def build_report(
                 "conflicting_segments": [k for k, h in enumerate(plain) if h],
                 "flagged_segments": flagged,
                 "levels": {str(k): v for k, v in sorted(c.levels.items())},
-                "edits": [e.detail for e in c.events if e.kind == "uploaded"],
+                "edits": [e.detail for e in c.events if e.kind is K.UPLOADED],
                 "edit": _edit_status(c),
                 "runs_unfinished": _unfinished(c),
-                "runs": [e.detail | {"t_s": round(e.t, 1)} for e in c.events if e.kind == "result"],
-                "failures": [e.detail | {"kind": e.kind} for e in c.events if "failed" in e.kind],
+                "runs": [e.detail | {"t_s": round(e.t, 1)} for e in c.events if e.kind is K.RESULT],
+                "failures": [e.detail | {"kind": e.kind} for e in c.events if e.failed],
                 "precautionary": precautionary,
                 "timeline": [
                     {"t_s": round(e.t, 1), "kind": e.kind}
@@ -160,7 +164,7 @@ def build_report(
                     "beacon_added_bytes": c.beacon_bytes
                     - UNAUTHENTICATED_SIZE * (c.beacons_sent["signed"] + c.beacons_sent["tagged"]),
                 },
-                "untrusted_heard": [e.detail["drone"] for e in c.events if e.kind == "untrusted"],
+                "untrusted_heard": [e.detail["drone"] for e in c.events if e.kind is K.UNTRUSTED],
                 "beacons_rejected": dict(c.rejected),
                 "max_altitude_m_amsl": round(
                     max((alt for *_, alt in mocks[d.id].trajectory), default=0.0), 2
@@ -221,33 +225,23 @@ def build_report(
 
 # Companion events after which the drone did not fly what it should have: a replay with one
 # has failed, whatever the separations say.
-FAILED_EVENTS = frozenset(
-    {
-        "plan_failed",
-        "upload_failed",
-        "hold_failed",
-        "resume_failed",
-        "mission_invalid",
-        "task_failed",
-    }
-)
 
 
 def _edit_status(c: Companion) -> str:
     """What became of the drone's mission: "verified" (an edit uploaded and read back the
     same), "failed" (an edit was needed and did not land) or "not needed"."""
-    if any(e.kind in ("plan_failed", "upload_failed") for e in c.events):
+    if any(e.kind in (K.PLAN_FAILED, K.UPLOAD_FAILED) for e in c.events):
         return "failed"
-    return "verified" if any(e.kind == "uploaded" for e in c.events) else "not needed"
+    return "verified" if any(e.kind is K.UPLOADED for e in c.events) else "not needed"
 
 
 def _unfinished(c: Companion) -> int:
     """Runs as Alice that started and neither gave a result nor failed (cut by the end)."""
     open_runs = 0
     for e in c.events:
-        if e.kind == "run_started":
+        if e.kind is K.RUN_STARTED:
             open_runs += 1
-        elif e.kind in ("result", "run_failed", "yielded", "setup_renewed") and open_runs:
+        elif e.kind in RUN_ENDS and open_runs:
             open_runs -= 1
     return open_runs
 
@@ -259,7 +253,7 @@ def notes(report: dict[str, Any]) -> list[str]:
     for d in report["drones"]:
         if d["precautionary"]:
             out.append(f"drone {d['id']}: {len(d['precautionary'])} precautionary action(s)")
-        failed = [f for f in d["failures"] if f["kind"] not in FAILED_EVENTS]
+        failed = [f for f in d["failures"] if f["kind"] not in FAILURES]
         if failed:
             kinds = ", ".join(sorted({f["kind"].replace("_", " ") for f in failed}))
             out.append(f"drone {d['id']}: {len(failed)} run(s) ended without a result ({kinds})")
@@ -275,7 +269,7 @@ def problems(report: dict[str, Any]) -> list[str]:
         out.append("the time limit ended the replay before every mission was flown")
     for d in report["drones"]:
         for failure in d["failures"]:
-            if failure["kind"] in FAILED_EVENTS:
+            if failure["kind"] in FAILURES:
                 why = failure.get("error") or failure.get("why") or ""
                 out.append(f"drone {d['id']}: {failure['kind'].replace('_', ' ')}: {why}")
     for p in report["pairs"]:
