@@ -25,8 +25,9 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from protocol.geodesy import ground_offset, moved
+
 from .mission import (
-    EARTH_RADIUS_M,
     NAV_LAND,
     NAV_LOITER_TIME,
     NAV_LOITER_TO_ALT,
@@ -40,7 +41,6 @@ from .mission import (
     NAV_WAYPOINT,
     MissionError,
     MissionItem,
-    ground_offset,
 )
 
 DO_JUMP = 177
@@ -176,9 +176,8 @@ def _circle(lat: int, lon: int, radius_m: float) -> list[tuple[int, int]]:
     for k in range(LOITER_SIDES):
         a = 2 * math.pi * k / LOITER_SIDES
         north, east = reach * math.cos(a), reach * math.sin(a)
-        dlat = math.degrees(north / EARTH_RADIUS_M)
-        dlon = math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(lat_deg))))
-        out.append((lat + round(dlat * 1e7), lon + round(dlon * 1e7)))
+        to_lat, to_lon = moved(lat_deg, lon / 1e7, north, east)
+        out.append((round(to_lat * 1e7), round(to_lon * 1e7)))
     return out
 
 

@@ -135,16 +135,7 @@ class MissionItem:
         )
 
 
-EARTH_RADIUS_M = 6_371_000.0
 P = TypeVar("P")
-
-
-def ground_offset(lat0: float, lon0: float, lat1: float, lon1: float) -> tuple[float, float]:
-    """(north, east) metres from point 0 to point 1 (degrees), on the local tangent plane --
-    plenty for the few kilometres between drones that talk over LoRa."""
-    north = math.radians(lat1 - lat0) * EARTH_RADIUS_M
-    east = math.radians(lon1 - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
-    return north, east
 
 
 def point_as_segment(path: Sequence[P]) -> list[P]:

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from protocol.geodesy import metres_per_degree
 from protocol.tools import cli
 
 from .flightpath import DO_JUMP
 from .mission import (
-    EARTH_RADIUS_M,
     FRAMES_GLOBAL,
     NAV_LAND,
     NAV_LOITER_TO_ALT,
@@ -192,8 +192,7 @@ def _offset_ring(
     """A polygon (lat, lon degrees) pushed ``distance_m`` outward: each edge moved out, the
     new corners where neighbouring moved edges meet (QGC's structure-scan flight ring)."""
     lat0, lon0 = polygon[0]
-    kx = EARTH_RADIUS_M * math.cos(math.radians(lat0)) * math.pi / 180
-    ky = EARTH_RADIUS_M * math.pi / 180
+    ky, kx = metres_per_degree(lat0)
     pts = [((lon - lon0) * kx, (lat - lat0) * ky) for lat, lon in polygon]
     area = sum(a[0] * b[1] - b[0] * a[1] for a, b in zip(pts, pts[1:] + pts[:1], strict=True))
     sign = 1.0 if area > 0 else -1.0  # outward normal of a counter-clockwise ring: (dy, -dx)

@@ -1,6 +1,6 @@
 """What a companion knows about each peer it hears (pure): beacons, speed, urgency, reach.
 
-Distances are on the local tangent plane (:func:`companion.mission.ground_offset`); speeds
+Distances are on the local tangent plane (:func:`protocol.geodesy.ground_offset`, WGS84); speeds
 come from successive beacons.  Urgency (:func:`time_to_meet`) comes from the rate at which
 the distance shrinks, beacon to beacon, or, without a fresh measurement, from the worst case:
 the two drones flying straight at each other, never below ``floor_m_s`` each.
@@ -13,10 +13,10 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from protocol.geodesy import ground_offset
 from protocol.intersection import MAX_SEGMENTS, Limits
 
 from .beacon import Beacon
-from .mission import ground_offset
 from .roles import Role
 
 

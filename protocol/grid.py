@@ -16,12 +16,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .errors import InputRangeError, RemoteProtocolError
+from .geodesy import east_north
 from .geometry import Point
-
-# WGS84 ellipsoid.
-_A = 6378137.0
-_F = 1 / 298.257223563
-_E2 = _F * (2 - _F)
 
 MAX_RANGE = 1 << 28  # keeps l <= 61 bits
 DEFAULT_RESOLUTION_MM = 500
@@ -44,16 +40,6 @@ def check_degE7(lat: int, lon: int) -> None:
         raise InputRangeError(f"latitude {lat} degE7 outside [-90, 90] degrees")
     if not -1_800_000_000 <= lon <= 1_800_000_000:
         raise InputRangeError(f"longitude {lon} degE7 outside [-180, 180] degrees")
-
-
-def _ecef(lat_e7: int, lon_e7: int) -> tuple[float, float, float]:
-    lat, lon = math.radians(lat_e7 / 1e7), math.radians(lon_e7 / 1e7)
-    n = _A / math.sqrt(1 - _E2 * math.sin(lat) ** 2)
-    return (
-        n * math.cos(lat) * math.cos(lon),
-        n * math.cos(lat) * math.sin(lon),
-        n * (1 - _E2) * math.sin(lat),
-    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,15 +92,8 @@ class GridSpec:
         if self.kind is not GridKind.GEO:
             raise InputRangeError("this grid takes plane coordinates, not latitude/longitude")
         check_degE7(lat_e7, lon_e7)
-        x, y, z = _ecef(lat_e7, lon_e7)
-        x0, y0, z0 = _ecef(self.ref_lat_e7, self.ref_lon_e7)
-        dx, dy, dz = x - x0, y - y0, z - z0
-        lat0, lon0 = math.radians(self.ref_lat_e7 / 1e7), math.radians(self.ref_lon_e7 / 1e7)
-        east = -math.sin(lon0) * dx + math.cos(lon0) * dy
-        north = (
-            -math.sin(lat0) * math.cos(lon0) * dx
-            - math.sin(lat0) * math.sin(lon0) * dy
-            + math.cos(lat0) * dz
+        east, north = east_north(
+            self.ref_lat_e7 / 1e7, self.ref_lon_e7 / 1e7, lat_e7 / 1e7, lon_e7 / 1e7
         )
         scale = 1000 / self.resolution_mm
         point = (round(east * scale), round(north * scale))

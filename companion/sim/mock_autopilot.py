@@ -23,17 +23,17 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from protocol.geodesy import ground_offset, moved
+
 from ..autopilots import personality
 from ..flightpath import DO_JUMP
 from ..mission import (
-    EARTH_RADIUS_M,
     FRAMES_AMSL,
     NAV_LAND,
     NAV_LOITER_TIME,
     NAV_RETURN_TO_LAUNCH,
     NAV_TAKEOFF,
     MissionItem,
-    ground_offset,
 )
 from . import mock_links as wire
 from .mock_links import PX4_BIND, PX4_GCS_BIND, PX4_GCS_SEND, PX4_SEND, Faults, Link
@@ -53,11 +53,7 @@ class FlightModel:
     rate_hz: float = 10.0
 
 
-def _moved(lat: float, lon: float, north: float, east: float) -> tuple[float, float]:
-    """The inverse of :func:`ground_offset`: a point moved by (north, east) metres."""
-    dlat = math.degrees(north / EARTH_RADIUS_M)
-    dlon = math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(lat))))
-    return lat + dlat, lon + dlon
+_moved = moved  # the inverse of ground_offset (protocol.geodesy)
 
 
 class MockAutopilot(MissionServer):

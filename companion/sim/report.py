@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from protocol.geodesy import ground_offset
 from protocol.geometry import path_hits
 from protocol.grid import GridSpec
 
@@ -17,7 +18,7 @@ from ..autopilots import personality
 from ..beacon import UNAUTHENTICATED_SIZE
 from ..events import FAILURES, RUN_ENDS
 from ..events import EventKind as K
-from ..mission import MissionItem, ground_offset, point_as_segment
+from ..mission import MissionItem, point_as_segment
 from ..runtime import Companion
 from .scenario import Scenario
 from .vehicles import ReplayVehicle

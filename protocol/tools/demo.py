@@ -1,4 +1,4 @@
-"""``make demo``: two drones near the PX4 SITL home compare their missions privately.
+"""``python -m protocol demo``: two drones near the PX4 SITL home compare their missions
 
 Embedded defaults: Alice's and Bob's missions as WGS84 waypoints (degE7) around Zurich, the
 PX4 SITL default home.  Alice's hello carries the grid (tangent plane at her home, 0.5 m cells);

@@ -17,14 +17,9 @@ from contextlib import asynccontextmanager
 import pytest
 
 from companion.autopilot import Autopilot, AutopilotError
-from companion.mission import (
-    EARTH_RADIUS_M,
-    FRAMES_RELATIVE,
-    MissionError,
-    MissionItem,
-    ground_offset,
-)
+from companion.mission import FRAMES_RELATIVE, MissionError, MissionItem
 from companion.sim.px4 import HOME, MissionRefused, Px4Build, Px4Vehicle
+from protocol.geodesy import ground_offset, moved
 
 pytestmark = [
     pytest.mark.asyncio,
@@ -41,8 +36,7 @@ TAKEOFF, WAYPOINT, LOITER_TIME, LAND, LOITER_TURNS = 22, 16, 19, 21, 18
 
 def at(north_m: float, east_m: float) -> tuple[int, int]:
     """degE7 of the point (north, east) metres from HOME."""
-    lat = HOME[0] + math.degrees(north_m / EARTH_RADIUS_M)
-    lon = HOME[1] + math.degrees(east_m / (EARTH_RADIUS_M * math.cos(math.radians(HOME[0]))))
+    lat, lon = moved(HOME[0], HOME[1], north_m, east_m)
     return round(lat * 1e7), round(lon * 1e7)
 
 
