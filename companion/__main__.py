@@ -6,18 +6,12 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
-import json
-import signal
 import sys
-from pathlib import Path
 
 from protocol.tools import cli
 
-from . import keys_cli, logs
-from .link import Channel, Clock, Impairments
+from . import commands, keys_cli
 from .link.airtime import PHY_MAX_FRAME, PROFILES
-from .link.udp import UdpHub
 
 DESCRIPTION = (
     "The flight companion of private drone deconfliction: it reads the mission through "
@@ -25,270 +19,6 @@ DESCRIPTION = (
     "conflicting segments higher."
 )
 MAX_INSTANCE = 253  # system id I + 1 <= 254 (255 is the ground station)
-
-DEFAULT_HOME = (47.397742, 8.545594, 488.0)  # PX4 SITL's default home
-
-
-def _stop_on_signals() -> asyncio.Event:
-    """An event set by SIGINT/SIGTERM (install before announcing readiness)."""
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        with contextlib.suppress(NotImplementedError):
-            loop.add_signal_handler(sig, stop.set)
-    return stop
-
-
-async def _hub(args: argparse.Namespace) -> int:
-    impairments = Impairments(
-        loss=args.loss,
-        corrupt=args.corrupt,
-        duplicate=args.duplicate,
-        reorder=args.reorder,
-        latency_s=args.latency,
-    )
-    channel = Channel(impairments, args.seed, collisions=not args.no_collisions)
-    hub = await UdpHub.serve(channel, args.host, args.port, Clock(args.time_scale))
-    host, port = hub.address
-    stop = _stop_on_signals()
-    print(f"link hub on udp://{host}:{port} ({impairments})", flush=True)
-    await stop.wait()
-    hub.close()
-    print(f"hub stopped: {channel.stats}", flush=True)
-    return 0
-
-
-async def _mock(args: argparse.Namespace) -> int:
-    from .missionfile import read_mission_file
-    from .sim.mock_autopilot import Faults, FlightModel, MockAutopilot
-
-    given = (args.home_lat, args.home_lon, args.home_alt)
-    home = tuple(DEFAULT_HOME[i] if v is None else v for i, v in enumerate(given))
-    mission = []
-    if args.mission:
-        plan = read_mission_file(args.mission)
-        if plan.home is not None and all(v is None for v in given):
-            home = plan.home  # the file's home, unless the command line gives one
-        mission = plan.for_autopilot(ardupilot=args.ardupilot)
-        if args.ardupilot:  # item 0 is the vehicle's home
-            lat, lon = round(home[0] * 1e7), round(home[1] * 1e7)
-            mission[0] = mission[0].replace(x=lat, y=lon, z=home[2])
-    faults = Faults(
-        drop_every=args.drop_every,
-        latency_s=args.latency,
-        ignore=frozenset(args.ignore or ()),
-        reject_upload=args.reject_upload,
-        vanish_after_s=args.vanish_after,
-    )
-    flight = FlightModel(cruise_m_s=args.speed, time_scale=args.time_scale)
-    mock = MockAutopilot(
-        args.instance,
-        mission=mission,
-        ardupilot=args.ardupilot,
-        faults=faults,
-        flight=flight,
-        home=(home[0], home[1], home[2]),
-    )
-    async with mock:
-        stop = _stop_on_signals()
-        kind = "ArduPilot" if args.ardupilot else "PX4"
-        print(
-            f"mock {kind} autopilot, system {mock.sysid}: listening on udp {mock.host}:"
-            f"{mock.bind_port}, sending to {mock.send_port} ({len(mission)} mission items)",
-            flush=True,
-        )
-        await stop.wait()
-    if args.trajectory:
-        from .sim.export import track_csv
-
-        cli.write_atomic(args.trajectory, track_csv(mock.trajectory))
-    return 0
-
-
-def _mission_show(args: argparse.Namespace) -> int:
-    from pymavlink.dialects.v20 import common as mavlink
-
-    from .flightpath import flight_path
-    from .mission import MissionError
-    from .missionfile import read_mission_file
-
-    plan = read_mission_file(args.file)
-    try:
-        items = plan.for_autopilot(ardupilot=args.ardupilot)
-        path = flight_path(items, plan.home_degE7, ardupilot=args.ardupilot)
-    except MissionError as exc:
-        raise MissionError(f"{args.file}: {exc}") from None
-    commands = mavlink.enums["MAV_CMD"]
-
-    def name(command: int) -> str:
-        """MAVLink's own name of a command (NAV_WAYPOINT, DO_CHANGE_SPEED, ...)."""
-        entry = commands.get(command)
-        return entry.name.removeprefix("MAV_CMD_") if entry is not None else str(command)
-
-    def where(k: int) -> str:
-        v = path.vertices[k]
-        items_ = "/".join(str(i) for i in v.items) or "-"
-        return f"{v.kind.value} (item {items_})"
-
-    on_path = {i for v in path.vertices for i in v.items}
-    movable = {i for v in path.vertices for i in v.moves}
-    if plan.home is not None:
-        print(f"home: {plan.home[0]:.7f}, {plan.home[1]:.7f}, {plan.home[2]:.1f} m AMSL")
-    print("| seq | command | frame | lat | lon | alt m | on path | edits move it |")
-    print("|---:|---|---:|---:|---:|---:|---|---|")
-    for it in items:
-        print(
-            f"| {it.seq} | {name(it.command)} | {it.frame} | {it.x / 1e7:.7f} | {it.y / 1e7:.7f} "
-            f"| {it.z:.1f} | {'yes' if it.seq in on_path else ''} "
-            f"| {'yes' if it.seq in movable else ''} |"
-        )
-    print(f"\nSegments of the flown path (what the protocol compares): {path.segments}")
-    for k in range(path.segments):
-        print(f"  segment {k}: {where(k)} -> {where(k + 1)}")
-    return 0
-
-
-async def _run(args: argparse.Namespace) -> int:
-    import logging
-
-    from .autopilot import Autopilot
-    from .autopilots import personality
-    from .config import load_config
-    from .link import LinkEndpoint, profile
-    from .link.medium import Transport
-    from .runtime import Companion
-
-    config = load_config(
-        args.config,
-        {
-            "node": args.node,
-            "autopilot": args.autopilot,
-            "log_level": args.log_level,
-            "link.transport": args.transport,
-            "link.profile": args.profile,
-            "link.hub": args.hub,
-            "link.serial": args.serial,
-            "offset.offset_m": args.offset,
-            "offset.max_altitude_m": args.max_altitude,
-        },
-    )
-    logs.setup(config.log_level, args.log_json, mavsdk=True)
-    log = logging.getLogger("companion")
-    settings, link = config.companion, config.link
-    if config.credentials is None:
-        raise cli.InputError(
-            "the companion needs an identity: [identity] key, certificate and [[trust.operator]] "
-            "in --config (python -m companion keys init|certify)"
-        )
-    transport: Transport
-    if link.transport == "serial":
-        from .link.serial_port import SerialTransport
-
-        transport = SerialTransport.open(link.serial, link.baudrate)
-    else:
-        from .link.udp import UdpTransport
-
-        transport = await UdpTransport.connect(settings.node, link.hub)
-    endpoint = LinkEndpoint(settings.node, transport, profile(link.profile))
-    log.info("node %d: connecting to the autopilot at %s", settings.node, settings.autopilot_url)
-    autopilot = await Autopilot.connect(
-        settings.autopilot_url, personality=personality(settings.ardupilot)
-    )
-    companion = Companion(settings, endpoint, autopilot, config.credentials)
-    stop = _stop_on_signals()
-    try:
-        await companion.start()
-        log.info(
-            "node %d: running (link %s over %s); SIGINT/SIGTERM to stop",
-            settings.node,
-            link.profile,
-            link.transport,
-        )
-        await stop.wait()
-        log.info("node %d: stopping", settings.node)
-    finally:
-        await companion.stop()
-        await autopilot.close()
-    return 0
-
-
-def _replay(args: argparse.Namespace) -> int:
-    from .sim.export import export
-    from .sim.plot import plot_report
-    from .sim.px4 import Px4Error, find_build
-    from .sim.replay import PX4_SPEED_MAX, run_replay
-    from .sim.report import format_report
-    from .sim.scenario import load_scenario
-
-    level = args.log_level or ("info" if args.log_json else "warning")
-    logs.setup(level, args.log_json, stderr_level=args.log_level or "warning", mavsdk=True)
-    scenario = load_scenario(args.scenario)  # all checked before anything starts
-    try:
-        build = find_build(args.px4) if args.px4 else None
-    except Px4Error as exc:
-        raise cli.InputError(f"PX4 SITL: {exc}") from None
-    replay = asyncio.run(
-        run_replay(
-            scenario,
-            progress=not args.json,
-            px4=build,
-            px4_speed_max=PX4_SPEED_MAX if args.px4_speed is None else args.px4_speed,
-        )
-    )
-    report = replay.report
-    if args.out:
-        cli.write_atomic(args.out, json.dumps(report, indent=2) + "\n")
-    if args.plot:
-        plot_report(replay, args.plot)
-    if args.export:
-        for path in export(replay, args.export):
-            print(f"wrote {path}", file=sys.stderr)
-    print(json.dumps(report, indent=2) if args.json else format_report(report))
-    return cli.EXIT_OK if report["ok"] else cli.EXIT_NEGATIVE
-
-
-def _compare(args: argparse.Namespace) -> int:
-    """The protocol's comparison over the simulated radio (the radio is the companion's)."""
-    from protocol.tools.compare import format_compare
-
-    from .link import profile
-    from .sim.over_link import compare_over_link
-
-    link = profile(args.link)
-    if args.mtu is not None:
-        largest = link.with_mtu(PHY_MAX_FRAME).max_frame
-        if args.mtu > largest:
-            raise cli.InputError(
-                f"--mtu {args.mtu}: {link.name} carries at most {largest} bytes per frame"
-                + (f" ({link.dwell_s * 1000:.0f} ms dwell time)" if link.dwell_s else "")
-            )
-        link = link.with_mtu(args.mtu)
-    result = compare_over_link(
-        args.alice,
-        args.bob,
-        args.suite,
-        link,
-        Impairments(loss=args.loss, corrupt=args.corrupt),
-        args.seed,
-        range_=args.range,
-        progress=not args.json,
-    )
-    print(json.dumps(result, indent=2) if args.json else format_compare(result))
-    return 0 if all(c["hits"] == c["plain_hits"] for c in result["cases"]) else 1
-
-
-def _bench_link(args: argparse.Namespace) -> int:
-    from protocol.tools.bench_paths import DEFAULT_DATA
-
-    from .sim.over_link import bench_link, format_link
-
-    data = Path(args.data) if args.data else DEFAULT_DATA
-    profiles = list(args.profiles) if args.profiles else None
-    result = bench_link(
-        data, profiles, suite=args.suite, range_=args.range, progress=not args.quiet
-    )
-    print(json.dumps(result, indent=2) if args.json else format_link(result))
-    return 0
 
 
 def _profile(text: str) -> str:
@@ -334,7 +64,7 @@ def _parser() -> argparse.ArgumentParser:
         "--time-scale", type=cli.number(0, 10_000, above=True), default=1.0, help="speed-up"
     )
     hub.add_argument("--no-collisions", action="store_true", help="overlapping frames both pass")
-    hub.set_defaults(func=lambda a: asyncio.run(_hub(a)))
+    hub.set_defaults(func=lambda a: asyncio.run(commands.hub(a)))
 
     mock = sub.add_parser("mock-autopilot", help="a MAVLink autopilot for tests and replays")
     mock.add_argument(
@@ -350,7 +80,7 @@ def _parser() -> argparse.ArgumentParser:
     home_help = "home %s (default: the mission file's home, else %s)"
     bounds = {"lat": cli.number(-90, 90), "lon": cli.number(-180, 180)}
     bounds["alt"] = cli.number(-500, 9000)
-    for key, value in zip(("lat", "lon", "alt"), DEFAULT_HOME, strict=True):
+    for key, value in zip(("lat", "lon", "alt"), commands.DEFAULT_HOME, strict=True):
         mock.add_argument(
             f"--home-{key}", type=bounds[key], default=None, help=home_help % (key, value)
         )
@@ -376,14 +106,14 @@ def _parser() -> argparse.ArgumentParser:
         type=cli.output_file(".csv"),
         help="write the flown trajectory (CSV) on exit",
     )
-    mock.set_defaults(func=lambda a: asyncio.run(_mock(a)))
+    mock.set_defaults(func=lambda a: asyncio.run(commands.mock(a)))
 
     mission = sub.add_parser("mission", help="mission files")
     mission_sub = mission.add_subparsers(dest="action", required=True, metavar="ACTION")
     show = mission_sub.add_parser("show", help="print a mission and its segments")
     show.add_argument("file", type=cli.existing_file, help=".plan or QGC WPL 110 file")
     show.add_argument("--ardupilot", action="store_true", help="item 0 is home")
-    show.set_defaults(func=_mission_show)
+    show.set_defaults(func=commands.mission_show)
 
     compare = sub.add_parser("compare", help="the encrypted path comparison over the radio link")
     compare.add_argument(
@@ -424,7 +154,7 @@ def _parser() -> argparse.ArgumentParser:
         help="radio frame size in bytes (default: the profile's)",
     )
     compare.add_argument("--json", action="store_true", help="machine-readable output")
-    compare.set_defaults(func=_compare)
+    compare.set_defaults(func=commands.compare)
 
     bench = sub.add_parser("bench-link", help="the paper's pairs and an 8x8 run over each profile")
     bench.add_argument("--data", help="directory with the paper's data (default: the bundled copy)")
@@ -439,10 +169,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("--json", action="store_true", help="machine-readable output")
     bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    bench.set_defaults(func=_bench_link)
+    bench.set_defaults(func=commands.bench_link)
 
     demo = sub.add_parser("radio-demo", help="the demo's comparison over simulated LoRa profiles")
-    demo.set_defaults(func=lambda a: _radio_demo())
+    demo.set_defaults(func=lambda a: commands.radio_demo())
 
     replay = sub.add_parser("replay", help="fly a scenario: mock autopilots, MAVSDK, companions")
     replay.add_argument(
@@ -476,7 +206,7 @@ def _parser() -> argparse.ArgumentParser:
         "which two vehicles, their companions and the protocol keep up on 2 cores)",
     )
     _log_flags(replay, "companions' log on stderr (default: warning)")
-    replay.set_defaults(func=_replay)
+    replay.set_defaults(func=commands.replay)
 
     run = sub.add_parser("run", help="the companion process beside one autopilot")
     run.add_argument(
@@ -493,21 +223,11 @@ def _parser() -> argparse.ArgumentParser:
         "--max-altitude", type=cli.number(0, 10_000, above=True), help="metres above home"
     )
     _log_flags(run, "log level (default: the config's, else info)")
-    run.set_defaults(func=_run_command)
+    run.set_defaults(func=commands.run_command)
 
     keys_cli.add_parser(sub)
     cli.add_common(parser)
     return parser
-
-
-def _radio_demo() -> int:
-    from .sim.over_link import radio_demo
-
-    return radio_demo()
-
-
-def _run_command(args: argparse.Namespace) -> int:
-    return asyncio.run(_run(args))
 
 
 def main(argv: list[str] | None = None) -> int:

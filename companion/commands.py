@@ -1,0 +1,294 @@
+"""What each ``drone-deconflict`` command does (the parser and ``main`` are in
+``companion/__main__.py``).  Commands raise on failure; :func:`protocol.tools.cli.run` turns
+expected failures into one line and exit 2."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import signal
+import sys
+from pathlib import Path
+
+from protocol.tools import cli
+
+from . import logs
+from .link import Channel, Clock, Impairments
+from .link.airtime import PHY_MAX_FRAME
+from .link.udp import UdpHub
+
+DEFAULT_HOME = (47.397742, 8.545594, 488.0)  # PX4 SITL's default home
+
+
+def _stop_on_signals() -> asyncio.Event:
+    """An event set by SIGINT/SIGTERM (install before announcing readiness)."""
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError):
+            loop.add_signal_handler(sig, stop.set)
+    return stop
+
+
+async def hub(args: argparse.Namespace) -> int:
+    impairments = Impairments(
+        loss=args.loss,
+        corrupt=args.corrupt,
+        duplicate=args.duplicate,
+        reorder=args.reorder,
+        latency_s=args.latency,
+    )
+    channel = Channel(impairments, args.seed, collisions=not args.no_collisions)
+    hub = await UdpHub.serve(channel, args.host, args.port, Clock(args.time_scale))
+    host, port = hub.address
+    stop = _stop_on_signals()
+    print(f"link hub on udp://{host}:{port} ({impairments})", flush=True)
+    await stop.wait()
+    hub.close()
+    print(f"hub stopped: {channel.stats}", flush=True)
+    return 0
+
+
+async def mock(args: argparse.Namespace) -> int:
+    from .missionfile import read_mission_file
+    from .sim.mock_autopilot import Faults, FlightModel, MockAutopilot
+
+    given = (args.home_lat, args.home_lon, args.home_alt)
+    home = tuple(DEFAULT_HOME[i] if v is None else v for i, v in enumerate(given))
+    mission = []
+    if args.mission:
+        plan = read_mission_file(args.mission)
+        if plan.home is not None and all(v is None for v in given):
+            home = plan.home  # the file's home, unless the command line gives one
+        mission = plan.for_autopilot(ardupilot=args.ardupilot)
+        if args.ardupilot:  # item 0 is the vehicle's home
+            lat, lon = round(home[0] * 1e7), round(home[1] * 1e7)
+            mission[0] = mission[0].replace(x=lat, y=lon, z=home[2])
+    faults = Faults(
+        drop_every=args.drop_every,
+        latency_s=args.latency,
+        ignore=frozenset(args.ignore or ()),
+        reject_upload=args.reject_upload,
+        vanish_after_s=args.vanish_after,
+    )
+    flight = FlightModel(cruise_m_s=args.speed, time_scale=args.time_scale)
+    mock = MockAutopilot(
+        args.instance,
+        mission=mission,
+        ardupilot=args.ardupilot,
+        faults=faults,
+        flight=flight,
+        home=(home[0], home[1], home[2]),
+    )
+    async with mock:
+        stop = _stop_on_signals()
+        kind = "ArduPilot" if args.ardupilot else "PX4"
+        print(
+            f"mock {kind} autopilot, system {mock.sysid}: listening on udp {mock.host}:"
+            f"{mock.bind_port}, sending to {mock.send_port} ({len(mission)} mission items)",
+            flush=True,
+        )
+        await stop.wait()
+    if args.trajectory:
+        from .sim.export import track_csv
+
+        cli.write_atomic(args.trajectory, track_csv(mock.trajectory))
+    return 0
+
+
+def mission_show(args: argparse.Namespace) -> int:
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from .flightpath import flight_path
+    from .mission import MissionError
+    from .missionfile import read_mission_file
+
+    plan = read_mission_file(args.file)
+    try:
+        items = plan.for_autopilot(ardupilot=args.ardupilot)
+        path = flight_path(items, plan.home_degE7, ardupilot=args.ardupilot)
+    except MissionError as exc:
+        raise MissionError(f"{args.file}: {exc}") from None
+    commands = mavlink.enums["MAV_CMD"]
+
+    def name(command: int) -> str:
+        """MAVLink's own name of a command (NAV_WAYPOINT, DO_CHANGE_SPEED, ...)."""
+        entry = commands.get(command)
+        return entry.name.removeprefix("MAV_CMD_") if entry is not None else str(command)
+
+    def where(k: int) -> str:
+        v = path.vertices[k]
+        items_ = "/".join(str(i) for i in v.items) or "-"
+        return f"{v.kind.value} (item {items_})"
+
+    on_path = {i for v in path.vertices for i in v.items}
+    movable = {i for v in path.vertices for i in v.moves}
+    if plan.home is not None:
+        print(f"home: {plan.home[0]:.7f}, {plan.home[1]:.7f}, {plan.home[2]:.1f} m AMSL")
+    print("| seq | command | frame | lat | lon | alt m | on path | edits move it |")
+    print("|---:|---|---:|---:|---:|---:|---|---|")
+    for it in items:
+        print(
+            f"| {it.seq} | {name(it.command)} | {it.frame} | {it.x / 1e7:.7f} | {it.y / 1e7:.7f} "
+            f"| {it.z:.1f} | {'yes' if it.seq in on_path else ''} "
+            f"| {'yes' if it.seq in movable else ''} |"
+        )
+    print(f"\nSegments of the flown path (what the protocol compares): {path.segments}")
+    for k in range(path.segments):
+        print(f"  segment {k}: {where(k)} -> {where(k + 1)}")
+    return 0
+
+
+async def run(args: argparse.Namespace) -> int:
+    import logging
+
+    from .autopilot import Autopilot
+    from .autopilots import personality
+    from .config import load_config
+    from .link import LinkEndpoint, profile
+    from .link.medium import Transport
+    from .runtime import Companion
+
+    config = load_config(
+        args.config,
+        {
+            "node": args.node,
+            "autopilot": args.autopilot,
+            "log_level": args.log_level,
+            "link.transport": args.transport,
+            "link.profile": args.profile,
+            "link.hub": args.hub,
+            "link.serial": args.serial,
+            "offset.offset_m": args.offset,
+            "offset.max_altitude_m": args.max_altitude,
+        },
+    )
+    logs.setup(config.log_level, args.log_json, mavsdk=True)
+    log = logging.getLogger("companion")
+    settings, link = config.companion, config.link
+    if config.credentials is None:
+        raise cli.InputError(
+            "the companion needs an identity: [identity] key, certificate and [[trust.operator]] "
+            "in --config (python -m companion keys init|certify)"
+        )
+    transport: Transport
+    if link.transport == "serial":
+        from .link.serial_port import SerialTransport
+
+        transport = SerialTransport.open(link.serial, link.baudrate)
+    else:
+        from .link.udp import UdpTransport
+
+        transport = await UdpTransport.connect(settings.node, link.hub)
+    endpoint = LinkEndpoint(settings.node, transport, profile(link.profile))
+    log.info("node %d: connecting to the autopilot at %s", settings.node, settings.autopilot_url)
+    autopilot = await Autopilot.connect(
+        settings.autopilot_url, personality=personality(settings.ardupilot)
+    )
+    companion = Companion(settings, endpoint, autopilot, config.credentials)
+    stop = _stop_on_signals()
+    try:
+        await companion.start()
+        log.info(
+            "node %d: running (link %s over %s); SIGINT/SIGTERM to stop",
+            settings.node,
+            link.profile,
+            link.transport,
+        )
+        await stop.wait()
+        log.info("node %d: stopping", settings.node)
+    finally:
+        await companion.stop()
+        await autopilot.close()
+    return 0
+
+
+def replay(args: argparse.Namespace) -> int:
+    from .sim.export import export
+    from .sim.plot import plot_report
+    from .sim.px4 import Px4Error, find_build
+    from .sim.replay import PX4_SPEED_MAX, run_replay
+    from .sim.report import format_report
+    from .sim.scenario import load_scenario
+
+    level = args.log_level or ("info" if args.log_json else "warning")
+    logs.setup(level, args.log_json, stderr_level=args.log_level or "warning", mavsdk=True)
+    scenario = load_scenario(args.scenario)  # all checked before anything starts
+    try:
+        build = find_build(args.px4) if args.px4 else None
+    except Px4Error as exc:
+        raise cli.InputError(f"PX4 SITL: {exc}") from None
+    replay = asyncio.run(
+        run_replay(
+            scenario,
+            progress=not args.json,
+            px4=build,
+            px4_speed_max=PX4_SPEED_MAX if args.px4_speed is None else args.px4_speed,
+        )
+    )
+    report = replay.report
+    if args.out:
+        cli.write_atomic(args.out, json.dumps(report, indent=2) + "\n")
+    if args.plot:
+        plot_report(replay, args.plot)
+    if args.export:
+        for path in export(replay, args.export):
+            print(f"wrote {path}", file=sys.stderr)
+    print(json.dumps(report, indent=2) if args.json else format_report(report))
+    return cli.EXIT_OK if report["ok"] else cli.EXIT_NEGATIVE
+
+
+def compare(args: argparse.Namespace) -> int:
+    """The protocol's comparison over the simulated radio (the radio is the companion's)."""
+    from protocol.tools.compare import format_compare
+
+    from .link import profile
+    from .sim.over_link import compare_over_link
+
+    link = profile(args.link)
+    if args.mtu is not None:
+        largest = link.with_mtu(PHY_MAX_FRAME).max_frame
+        if args.mtu > largest:
+            raise cli.InputError(
+                f"--mtu {args.mtu}: {link.name} carries at most {largest} bytes per frame"
+                + (f" ({link.dwell_s * 1000:.0f} ms dwell time)" if link.dwell_s else "")
+            )
+        link = link.with_mtu(args.mtu)
+    result = compare_over_link(
+        args.alice,
+        args.bob,
+        args.suite,
+        link,
+        Impairments(loss=args.loss, corrupt=args.corrupt),
+        args.seed,
+        range_=args.range,
+        progress=not args.json,
+    )
+    print(json.dumps(result, indent=2) if args.json else format_compare(result))
+    return 0 if all(c["hits"] == c["plain_hits"] for c in result["cases"]) else 1
+
+
+def bench_link(args: argparse.Namespace) -> int:
+    from protocol.tools.bench_paths import DEFAULT_DATA
+
+    from .sim.over_link import bench_link, format_link
+
+    data = Path(args.data) if args.data else DEFAULT_DATA
+    profiles = list(args.profiles) if args.profiles else None
+    result = bench_link(
+        data, profiles, suite=args.suite, range_=args.range, progress=not args.quiet
+    )
+    print(json.dumps(result, indent=2) if args.json else format_link(result))
+    return 0
+
+
+def radio_demo() -> int:
+    from .sim.over_link import radio_demo
+
+    return radio_demo()
+
+
+def run_command(args: argparse.Namespace) -> int:
+    return asyncio.run(run(args))
