@@ -1,24 +1,19 @@
-"""Mission files: QGroundControl ``.plan`` (JSON) and MAVLink ``QGC WPL 110`` text.
-
-Reading is strict: anything malformed raises :class:`~companion.mission.MissionError` naming
-the item (plan) or line (WPL).  Writing goes to a temporary file renamed over the target, so a
-failure never leaves a half-written mission.
-"""
+"""QGroundControl ``.plan`` (JSON): simple items, complex items expanded (survey, corridor and
+structure scans, landing patterns), the planned home; and writing one back."""
 
 from __future__ import annotations
 
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from protocol.geodesy import metres_per_degree
 from protocol.tools import cli
 
-from .flightpath import DO_JUMP
-from .mission import (
+from ..flightpath import DO_JUMP
+from ..mission import (
     FRAMES_GLOBAL,
     NAV_LAND,
     NAV_LOITER_TO_ALT,
@@ -29,60 +24,8 @@ from .mission import (
     POSITIONAL_NAV,
     MissionError,
     MissionItem,
-    normalise,
 )
-
-WPL_HEADER = "QGC WPL 110"
-MAX_FILE_BYTES = 16 << 20
-
-
-def _read(path: str | Path) -> str:
-    p = Path(path)
-    try:
-        if p.stat().st_size > MAX_FILE_BYTES:
-            raise MissionError(f"{p}: larger than {MAX_FILE_BYTES} bytes")
-        return p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MissionError(f"{p}: {exc}") from None
-
-
-def _xy(frame: int, lat: float, lon: float) -> tuple[int, int]:
-    if frame in FRAMES_GLOBAL:
-        return round(lat * 1e7), round(lon * 1e7)
-    return round(lat), round(lon)
-
-
-def _num(value: Any, where: str) -> float:
-    if value is None:
-        return math.nan  # QGC writes NaN as null
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise MissionError(f"{where}: expected a number, got {value!r}")
-    return float(value)
-
-
-def _checked(item: MissionItem, where: str) -> MissionItem:
-    item.check(where)
-    return item
-
-
-def shift_jumps(items: Sequence[MissionItem], delta: int) -> list[MissionItem]:
-    """DO_JUMP targets (param1, an item number) moved by ``delta``: a home item added in
-    front (+1, ArduPilot and WPL count home as item 0) or taken away (-1)."""
-    return [
-        it.replace(param1=it.param1 + delta)
-        if it.command == DO_JUMP and math.isfinite(it.param1)
-        else it
-        for it in items
-    ]
-
-
-def _complete(items: list[MissionItem], name: str) -> list[MissionItem]:
-    if not items:
-        raise MissionError(f"{name}: the mission has no items")
-    return normalise(items)
-
-
-# ---------------------------------------------------------------------------- .plan
+from .common import MissionFile, _checked, _complete, _finite, _num, _read, _xy
 
 # commands that may stand "here", without a position (QGC writes null lat/lon for them)
 POSITION_OPTIONAL = frozenset({NAV_TAKEOFF, NAV_VTOL_TAKEOFF, NAV_LAND, NAV_VTOL_LAND})
@@ -92,46 +35,6 @@ NULL_ALTITUDE_HINT = (
     "QGroundControl writes null when an altitude 'calculated above terrain' had no terrain "
     "data: open the plan with terrain data and save it again, or give the altitude"
 )
-
-
-@dataclass(frozen=True)
-class MissionFile:
-    """A mission as a file states it: the items to fly (without any home item) and the
-    planned home (lat, lon, alt AMSL), if the file gives one."""
-
-    items: list[MissionItem]
-    home: tuple[float, float, float] | None
-
-    @property
-    def home_degE7(self) -> tuple[int, int] | None:
-        return None if self.home is None else (round(self.home[0] * 1e7), round(self.home[1] * 1e7))
-
-    def for_autopilot(self, *, ardupilot: bool = False) -> list[MissionItem]:
-        """The items as the autopilot should hold them: ArduPilot's item 0 is home; PX4
-        takes a take-off's latitude/longitude literally, so a take-off "here" (0,0 in the
-        file) gets home's position, as QGroundControl writes it."""
-        if not ardupilot:
-            home = self.home_degE7
-            return normalise(
-                [
-                    it.replace(x=home[0], y=home[1])
-                    if home is not None
-                    and it.command in (NAV_TAKEOFF, NAV_VTOL_TAKEOFF)
-                    and it.frame in FRAMES_GLOBAL
-                    and (it.x, it.y) == (0, 0)
-                    else it
-                    for it in self.items
-                ]
-            )
-        if self.home is None:
-            raise MissionError("an ArduPilot mission needs a home (item 0): the file has none")
-        lat, lon = self.home_degE7 or (0, 0)
-        home_item = MissionItem(0, 0, NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, lat, lon, self.home[2])
-        return normalise([home_item, *shift_jumps(self.items, +1)])
-
-
-def _finite(value: object) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _simple_item(raw: dict[str, Any], number: int, where: str) -> MissionItem:
@@ -412,118 +315,3 @@ def format_plan(items: Sequence[MissionItem], home: Sequence[float]) -> str:
 
 def write_plan(path: str | Path, items: Sequence[MissionItem], home: Sequence[float]) -> None:
     cli.write_atomic(path, format_plan(items, home))
-
-
-# ---------------------------------------------------------------------------- QGC WPL 110
-
-
-def parse_wpl_file(text: str, name: str = "mission") -> MissionFile:
-    """``QGC WPL 110``: one item per line (seq current frame command p1-p4 lat lon alt
-    autocontinue, tab- or space-separated).  Read as QGroundControl, MAVProxy and ArduPilot
-    read it: the first item is home, the rest is the mission; ``#`` lines are comments and
-    sequence numbers only order the lines (a file may start at 1)."""
-    lines = text.splitlines()
-    if not lines or lines[0].strip() != WPL_HEADER:
-        raise MissionError(f"{name}: line 1: expected {WPL_HEADER!r}")
-    items: list[MissionItem] = []
-    last_seq = -1
-    for number, line in enumerate(lines[1:], start=2):
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        fields = line.split()
-        where = f"{name}: line {number}"
-        if len(fields) != 12:
-            raise MissionError(f"{where}: expected 12 fields, found {len(fields)}")
-        try:
-            seq, current, frame, command = (int(f) for f in fields[:4])
-            p = [float(f) for f in fields[4:11]]
-            autocontinue = int(fields[11])
-        except ValueError as exc:
-            raise MissionError(f"{where}: {exc}") from None
-        if seq <= last_seq:
-            raise MissionError(f"{where}: sequence number {seq} after {last_seq}")
-        last_seq = seq
-        if any(math.isinf(v) for v in p):
-            raise MissionError(f"{where}: a parameter is infinite")
-        if frame in FRAMES_GLOBAL and command in POSITIONAL_NAV:
-            if not math.isfinite(p[6]):
-                raise MissionError(f"{where}: altitude is not a number")
-            if not all(map(math.isfinite, p[4:6])):  # "here" is 0, 0 in a WPL file
-                raise MissionError(f"{where}: latitude/longitude is not a number")
-        x, y = _xy(frame, p[4], p[5]) if all(map(math.isfinite, p[4:6])) else (0, 0)
-        item = MissionItem(
-            len(items),
-            frame,
-            command,
-            current,
-            autocontinue,
-            p[0],
-            p[1],
-            p[2],
-            p[3],
-            x,
-            y,
-            p[6] if math.isfinite(p[6]) else 0.0,
-        )
-        items.append(_checked(item, where))
-    if not items:
-        raise MissionError(f"{name}: no items (the first line after the header is home)")
-    first = items[0]
-    if first.frame not in FRAMES_GLOBAL or (first.x, first.y) == (0, 0):
-        raise MissionError(f"{name}: the first item is home and needs a position")
-    home = (first.x / 1e7, first.y / 1e7, first.z)
-    rest = [it.replace(seq=i) for i, it in enumerate(items[1:])]  # jumps counted home as 0
-    return MissionFile(_complete(shift_jumps(rest, -1), name), home)
-
-
-def parse_wpl(text: str, name: str = "mission") -> list[MissionItem]:
-    """The mission items of a WPL file (home excluded)."""
-    return parse_wpl_file(text, name).items
-
-
-def read_wpl(path: str | Path) -> list[MissionItem]:
-    return parse_wpl(_read(path), str(path))
-
-
-def format_wpl(items: Sequence[MissionItem], home: Sequence[float]) -> str:
-    """WPL with ``home`` (lat, lon, alt AMSL) as item 0, the items after it."""
-    first = MissionItem(
-        0, 0, NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, round(home[0] * 1e7), round(home[1] * 1e7), home[2]
-    )
-    rows = [WPL_HEADER]
-    for it in [first, *(it.replace(seq=i + 1) for i, it in enumerate(shift_jumps(items, +1)))]:
-        lat = it.x / 1e7 if it.frame in FRAMES_GLOBAL else float(it.x)
-        lon = it.y / 1e7 if it.frame in FRAMES_GLOBAL else float(it.y)
-        fields = [
-            it.seq,
-            it.current,
-            it.frame,
-            it.command,
-            it.param1,
-            it.param2,
-            it.param3,
-            it.param4,
-            f"{lat:.7f}",
-            f"{lon:.7f}",
-            it.z,
-            it.autocontinue,
-        ]
-        rows.append("\t".join(str(f) for f in fields))
-    return "\n".join(rows) + "\n"
-
-
-def write_wpl(path: str | Path, items: Sequence[MissionItem], home: Sequence[float]) -> None:
-    cli.write_atomic(path, format_wpl(items, home))
-
-
-def read_mission_file(path: str | Path) -> MissionFile:
-    """Either format, by content."""
-    text = _read(path)
-    if text.lstrip().startswith(WPL_HEADER):
-        return parse_wpl_file(text, str(path))
-    return parse_plan_file(text, str(path))
-
-
-def read_mission(path: str | Path) -> list[MissionItem]:
-    """The mission items of either format (home excluded)."""
-    return read_mission_file(path).items
