@@ -92,9 +92,9 @@ async def mock(args: argparse.Namespace) -> int:
         )
         await stop.wait()
     if args.trajectory:
-        from .sim.export import track_csv
+        from .sim.export import tracks_csv
 
-        cli.write_atomic(args.trajectory, track_csv(mock.trajectory))
+        cli.write_atomic(args.trajectory, tracks_csv({0: mock.trajectory}))
     return 0
 
 

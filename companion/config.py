@@ -124,23 +124,16 @@ def _credentials(doc: Table, base: Path, node: int) -> Credentials | None:
     for k, entry in enumerate(entries):
         name = entry.text("name", f"operator{k}")
         text = entry.text("key")
+        max_segments = entry.integer("max_segments", 256, low=1, high=MAX_SEGMENTS)
+        runs = entry.integer("max_runs_per_hour", 24, low=1)
         try:
             public = (
                 PublicKey.parse(text)
                 if len(text.strip()) == 64 and not Path(text).suffix
                 else read_public_key(_path(base, text))
             )
-            operators.append(
-                Operator(
-                    name,
-                    public,
-                    entry.integer("max_segments", 256, low=1, high=MAX_SEGMENTS),
-                    entry.integer("max_runs_per_hour", 24, low=1),
-                )
-            )
+            operators.append(Operator(name, public, max_segments, runs))
         except (KeyFileError, ValueError) as exc:
-            if isinstance(exc, TableError):
-                raise
             raise entry.fail(f"({name}) {exc}") from None
     return Credentials(Identity(key, cert), TrustStore(operators, UnknownPeers(policy)), state)
 
@@ -172,15 +165,14 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
         raise link.fail("expected HOST:PORT with a port 1..65535", "hub")
     level = doc.text("log_level", "info", ("debug", "info", "warning", "error"))
+    offset_m = offset.number("offset_m", 10.0, low=0.0, above=True)
+    direction = offset.text("direction", "up", ("up", "down"))
+    max_altitude_m = offset.number("max_altitude_m", 120.0, low=0.0, above=True)
     try:
         offset_settings = OffsetSettings(
-            offset_m=offset.number("offset_m", 10.0, low=0.0, above=True),
-            direction=offset.text("direction", "up", ("up", "down")),
-            max_altitude_m=offset.number("max_altitude_m", 120.0, low=0.0, above=True),
+            offset_m=offset_m, direction=direction, max_altitude_m=max_altitude_m
         )
     except ValueError as exc:
-        if isinstance(exc, TableError):
-            raise
         raise offset.fail(str(exc)) from None
     suites = {s.label: s for s in Suite}
     suite = doc.text("suite", "compact", list(suites))

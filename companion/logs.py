@@ -95,9 +95,10 @@ def setup(
     file_level = logging.getLevelName(level.upper())
     root.setLevel(min(text_level, file_level) if json_file is not None else text_level)
     text = logging.StreamHandler()
-    text.setFormatter(logging.Formatter(TEXT_FORMAT))
+    formatter = logging.Formatter(TEXT_FORMAT)
+    formatter.converter = time.gmtime  # UTC, as the JSON lines' Unix times
+    text.setFormatter(formatter)
     text.setLevel(text_level)
-    logging.Formatter.converter = time.gmtime  # UTC, as the JSON lines' Unix times
     root.addHandler(text)
     if json_file is not None:
         lines = logging.FileHandler(json_file, encoding="utf-8")  # flushed at every record

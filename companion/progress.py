@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 
 from . import logs
 from .link.endpoint import LinkEndpoint, LinkStats
@@ -36,14 +36,20 @@ class Totals:
     duty_wait_s: float
 
     @classmethod
-    def between(cls, start: LinkStats, now: LinkStats) -> Totals:
+    def of(cls, stats: LinkStats) -> Totals:
+        """The endpoint's counters now."""
         return cls(
-            now.bytes_sent - start.bytes_sent,
-            now.frames_sent - start.frames_sent,
-            now.bytes_received - start.bytes_received,
-            now.frames_received - start.frames_received,
-            now.airtime_s - start.airtime_s,
-            now.duty_wait_s - start.duty_wait_s,
+            stats.bytes_sent,
+            stats.frames_sent,
+            stats.bytes_received,
+            stats.frames_received,
+            stats.airtime_s,
+            stats.duty_wait_s,
+        )
+
+    def __sub__(self, start: Totals) -> Totals:
+        return Totals(
+            *(now - then for now, then in zip(astuple(self), astuple(start), strict=True))
         )
 
 
@@ -69,11 +75,11 @@ class RunProgress:
         self.ends_at = ends_at
         self.clock = endpoint.clock
         self.started = self.clock.now()
-        self.start = _copy(endpoint.stats)
+        self.start = Totals.of(endpoint.stats)
         self._task: asyncio.Task[None] | None = None
 
     def totals(self) -> Totals:
-        return Totals.between(self.start, self.endpoint.stats)
+        return Totals.of(self.endpoint.stats) - self.start
 
     def __enter__(self) -> RunProgress:
         self._task = asyncio.create_task(self._report(), name=f"progress {self.peer}")
@@ -136,14 +142,3 @@ class RunProgress:
             duty_wait_s=round(done.duty_wait_s, 2),
             left_s=None if left is None else round(left, 1),
         )
-
-
-def _copy(stats: LinkStats) -> LinkStats:
-    return LinkStats(
-        frames_sent=stats.frames_sent,
-        bytes_sent=stats.bytes_sent,
-        airtime_s=stats.airtime_s,
-        duty_wait_s=stats.duty_wait_s,
-        frames_received=stats.frames_received,
-        bytes_received=stats.bytes_received,
-    )

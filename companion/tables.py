@@ -87,11 +87,6 @@ class Table:
             raise self.fail(f"{value:g} is out of range (must be at most {high:g})", key)
         return float(value)
 
-    def optional_number(self, key: str, **bounds: Any) -> float | None:
-        """A number that may be left out (None)."""
-        self.known.add(key)
-        return self.number(key, **bounds) if key in self.doc else None
-
     def integer(
         self,
         key: str,

@@ -15,7 +15,7 @@ Each file is written whole or not at all (:func:`protocol.tools.cli.write_atomic
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from xml.etree import ElementTree as ET
@@ -30,12 +30,15 @@ KML_NS = "http://www.opengis.net/kml/2.2"
 COLOURS = ("ff1f77b4", "ff0e7fff", "ff2ca02c", "ff2827d6", "ffbd6794", "ff4b568c")  # aabbggrr
 
 
-def track_csv(track: Track, drone: int | None = None) -> str:
-    """A flown track as CSV (with a drone column when ``drone`` is given)."""
-    head = ("drone," if drone is not None else "") + "t_s,lat_deg,lon_deg,alt_m_amsl\n"
-    lead = f"{drone}," if drone is not None else ""
+def tracks_csv(tracks: Mapping[int, Track]) -> str:
+    """Flown tracks as CSV, one row per sample; with a drone column for more than one
+    (``tracks`` keyed by drone, or by 0 for a single vehicle's own track)."""
+    many = len(tracks) > 1
+    head = ("drone," if many else "") + "t_s,lat_deg,lon_deg,alt_m_amsl\n"
     return head + "".join(
-        f"{lead}{t:.2f},{lat:.7f},{lon:.7f},{alt:.2f}\n" for t, lat, lon, alt in track
+        f"{f'{ident},' if many else ''}{t:.2f},{lat:.7f},{lon:.7f},{alt:.2f}\n"
+        for ident, track in sorted(tracks.items())
+        for t, lat, lon, alt in track
     )
 
 
@@ -92,14 +95,14 @@ def _at(track: Track, t: float) -> tuple[float, float, float] | None:
     return lat, lon, alt
 
 
-def kml(replay: Replay) -> str:
-    """The encounter as a KML document (placemarks from :func:`features`)."""
+def kml(replay: Replay, placemarks: list[dict[str, Any]]) -> str:
+    """The encounter as a KML document (``placemarks``: its :func:`features`)."""
     ET.register_namespace("", KML_NS)
     root = ET.Element(f"{{{KML_NS}}}kml")
     doc = ET.SubElement(root, f"{{{KML_NS}}}Document")
     ET.SubElement(doc, f"{{{KML_NS}}}name").text = f"replay {replay.report['scenario']}"
     order = {d["id"]: n for n, d in enumerate(replay.report["drones"])}
-    for feature in features(replay):
+    for feature in placemarks:
         props = feature["properties"]
         kind = props["kind"]
         mark = ET.SubElement(doc, f"{{{KML_NS}}}Placemark")
@@ -142,14 +145,11 @@ def kml(replay: Replay) -> str:
 def export(replay: Replay, directory: Path) -> list[Path]:
     """Write the three files into ``directory`` (created if its parent exists)."""
     directory.mkdir(exist_ok=True)
-    csv = "drone,t_s,lat_deg,lon_deg,alt_m_amsl\n" + "".join(
-        track_csv(track, ident).split("\n", 1)[1]
-        for ident, track in sorted(replay.tracks.flown.items())
-    )
-    collection = {"type": "FeatureCollection", "features": features(replay)}
+    placemarks = features(replay)
+    collection = {"type": "FeatureCollection", "features": placemarks}
     files = {
-        "tracks.csv": csv,
-        "encounter.kml": kml(replay),
+        "tracks.csv": tracks_csv(replay.tracks.flown),
+        "encounter.kml": kml(replay, placemarks),
         "encounter.geojson": json.dumps(collection, indent=1) + "\n",
     }
     written = []

@@ -53,9 +53,6 @@ class FlightModel:
     rate_hz: float = 10.0
 
 
-_moved = moved  # the inverse of ground_offset (protocol.geodesy)
-
-
 class MockAutopilot(MissionServer):
     """``await MockAutopilot(instance, mission=...).start()``; ``await stop()``.
 
@@ -360,7 +357,7 @@ class MockAutopilot(MissionServer):
         dist = math.hypot(north, east)
         step = min(dist, f.cruise_m_s * dt)
         if dist > 0:
-            self.lat, self.lon = _moved(self.lat, self.lon, north * step / dist, east * step / dist)
+            self.lat, self.lon = moved(self.lat, self.lon, north * step / dist, east * step / dist)
         dz = target[2] - self.alt
         self.alt += max(-f.climb_m_s * dt, min(f.climb_m_s * dt, dz))
         if dist - step <= f.acceptance_m and abs(target[2] - self.alt) <= 0.5:

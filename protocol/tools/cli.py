@@ -21,7 +21,7 @@ import os
 import sys
 import tempfile
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 from typing import NoReturn
@@ -49,7 +49,6 @@ _OS_HINTS = {
     errno.EADDRINUSE: "another process uses this address: stop it or choose another port",
     errno.EADDRNOTAVAIL: "this machine has no such address: use 127.0.0.1 or 0.0.0.0",
     errno.EACCES: "permission denied: check the file's or port's permissions",
-    errno.ENOENT: "no such file or directory",
     errno.ECONNREFUSED: "nothing listens there: start it first",
 }
 
@@ -67,9 +66,7 @@ def describe(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.strerror:
         where = f"{exc.filename}: " if exc.filename else ""
         hint = _OS_HINTS.get(exc.errno or 0)
-        text = f"{where}{exc.strerror}"
-        if hint and hint.lower() != exc.strerror.lower():
-            text += f" ({hint})"
+        text = f"{where}{exc.strerror}" + (f" ({hint})" if hint else "")
     else:
         text = str(exc) or type(exc).__name__
     return " ".join(text.split())
@@ -283,9 +280,3 @@ def write_atomic(path: str | Path, data: bytes | str, mode: int = 0o644) -> None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-
-
-def choices_text(names: Sequence[str]) -> str:
-    """``a, b or c``."""
-    names = list(names)
-    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
