@@ -82,7 +82,8 @@ class _Party:
         charge_cpu: bool,
     ) -> None:
         self.endpoint, self.peer, self.session = endpoint, peer, session
-        self.machine, self.report, self.charge_cpu = machine, report, charge_cpu
+        self.machine, self.report = machine, report
+        self.charge_cpu = charge_cpu or endpoint.clock.charges_cpu
 
     async def compute(self, step: Callable[[], T]) -> T:
         """Run one machine step.  On a virtual clock it runs inline and its CPU time passes as

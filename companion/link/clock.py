@@ -11,6 +11,7 @@ It is for simulations without real I/O; a simulation in which everything waits f
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import selectors
 import time
 from collections.abc import Awaitable, Callable, Coroutine
@@ -21,6 +22,10 @@ T = TypeVar("T")
 
 class Clock:
     """Seconds of link time; ``scale`` link seconds pass per second of the event loop."""
+
+    # A simulation's clock may want each protocol step's CPU charged as link time (computed
+    # inline, the party then waits its thread CPU): see companion.sim.paced_clock.
+    charges_cpu = False
 
     def __init__(self, scale: float = 1.0) -> None:
         if scale <= 0:
@@ -46,7 +51,7 @@ class Clock:
         """Like :func:`asyncio.wait_for`, in link seconds (raises TimeoutError)."""
         return await asyncio.wait_for(awaitable, max(seconds, 0.0) / self.scale)
 
-    def timeout(self, seconds: float | None) -> asyncio.Timeout:
+    def timeout(self, seconds: float | None) -> contextlib.AbstractAsyncContextManager[object]:
         return asyncio.timeout(None if seconds is None else seconds / self.scale)
 
     def call_later(self, seconds: float, callback: Callable[..., object], *args: Any) -> None:

@@ -2,9 +2,10 @@
 
 Enough of PX4 (or ArduPilot) for MAVSDK and any ground station: HEARTBEAT from component 1,
 AUTOPILOT_VERSION and HOME_POSITION, the mission protocol for the mission, fence and rally
-types (:mod:`companion.mock_missions`), command acknowledgements, GLOBAL_POSITION_INT
-telemetry, and a kinematic flight model that flies the stored mission in scaled time,
-DO_JUMP loops included.  Links as PX4 SITL (:mod:`companion.mock_links`): instance i has an
+types (:mod:`companion.sim.mock_missions`, the store), command acknowledgements and
+GLOBAL_POSITION_INT telemetry of the kinematic flight (:mod:`companion.sim.mock_flight`),
+which flies the stored mission in simulated time, DO_JUMP loops included.  This module is
+the MAVLink endpoint.  Links as PX4 SITL (:mod:`companion.sim.mock_links`): instance i has an
 API link (binds 14580+i, sends to 14540+i) and a GCS link (binds 18570+i, sends to 14550),
 system id i+1.  The firmware's personality (:mod:`companion.autopilots`) decides which items
 are refused, how they are stored, and where an upload leaves the current item (PX4: at the
@@ -18,42 +19,21 @@ import asyncio
 import contextlib
 import math
 import time
-from dataclasses import dataclass
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from protocol.geodesy import ground_offset, moved
-
-from ..autopilots import personality
-from ..flightpath import DO_JUMP
-from ..mission import (
-    FRAMES_AMSL,
-    NAV_LAND,
-    NAV_LOITER_TIME,
-    NAV_RETURN_TO_LAUNCH,
-    NAV_TAKEOFF,
-    MissionItem,
-)
+from ..link.clock import Clock
+from ..mission import MissionItem
 from . import mock_links as wire
+from .mock_flight import FlightModel, MockFlight
 from .mock_links import PX4_BIND, PX4_GCS_BIND, PX4_GCS_SEND, PX4_SEND, Faults, Link
-from .mock_missions import MissionServer, item_message
+from .mock_missions import item_message
 
 __all__ = ["PX4_BIND", "PX4_SEND", "Faults", "FlightModel", "MockAutopilot", "item_message"]
 
 
-@dataclass(frozen=True)
-class FlightModel:
-    """Kinematics of the simulated multicopter and how fast simulated time runs."""
-
-    cruise_m_s: float = 10.0
-    climb_m_s: float = 3.0
-    acceptance_m: float = 2.0
-    time_scale: float = 1.0  # simulated seconds per real second
-    rate_hz: float = 10.0
-
-
-class MockAutopilot(MissionServer):
+class MockAutopilot(MockFlight):
     """``await MockAutopilot(instance, mission=...).start()``; ``await stop()``.
 
     Ports: ``bind_port``/``send_port`` are the API link (default 14580+i / 14540+i).  The GCS
@@ -76,11 +56,10 @@ class MockAutopilot(MissionServer):
         send_port: int | None = None,
         gcs_bind_port: int | None = None,
         gcs_send_port: int = PX4_GCS_SEND,
+        clock: Clock | None = None,
     ) -> None:
         self.instance = instance
         self.sysid = instance + 1
-        self.ardupilot = ardupilot
-        self.flight = flight or FlightModel()
         self.host = host
         self.bind_port = PX4_BIND + instance if bind_port is None else bind_port
         self.send_port = PX4_SEND + instance if send_port is None else send_port
@@ -88,15 +67,14 @@ class MockAutopilot(MissionServer):
             gcs_bind_port = PX4_GCS_BIND + instance if bind_port is None else 0
         self.gcs_bind_port, self.gcs_send_port = gcs_bind_port, gcs_send_port
         self.mav = mavlink.MAVLink(None, srcSystem=self.sysid, srcComponent=1)  # encoder
-        super().__init__(personality(ardupilot), home, faults or Faults(), mission)
-        self.current = 1 if ardupilot and len(self.mission) > 1 else 0
-        self.lat, self.lon, self.alt = home[0], home[1], 0.0  # alt: metres above home
-        self.armed = False
-        self.flying = False
-        self.mission_running = False
-        self.holding = False  # paused in flight (hold / loiter mode)
-        self.trajectory: list[tuple[float, float, float, float]] = []
-        self.reached: list[int] = []  # items reached in flight, in order (MISSION_ITEM_REACHED)
+        super().__init__(
+            mission=mission,
+            home=home,
+            ardupilot=ardupilot,
+            faults=faults,
+            flight=flight,
+            clock=clock,
+        )
         self.received: dict[str, int] = {}
         self.links: list[Link] = []
         self.api_link: Link | None = None
@@ -104,16 +82,14 @@ class MockAutopilot(MissionServer):
         self._replies = 0
         self._tasks: list[asyncio.Task[None]] = []
         self._started = 0.0
-        self.origin = 0.0
-        self._sim_time = 0.0
-        self._takeoff_alt: float | None = None
-        self._rtl_descending = False
-        self._hold_until: float | None = None
+
+    def _item_reached(self, seq: int) -> None:
+        self._send(self.mav.mission_item_reached_encode(seq))
 
     # ------------------------------------------------------------------ lifecycle
 
     async def start(self, origin: float | None = None) -> MockAutopilot:
-        """Open the links and run; ``origin`` (time.monotonic) is simulated time zero."""
+        """Open the links and run; ``origin`` (a time of :attr:`now`) is simulated time zero."""
         self.api_link = Link("api", self.host, self.bind_port, self.send_port, self.sysid, self._on)
         self.links = [self.api_link]
         if self.gcs_bind_port:
@@ -129,7 +105,7 @@ class MockAutopilot(MissionServer):
                 link.close()
             raise
         self._started = time.monotonic()
-        self.origin = self._started if origin is None else origin
+        self.origin = self.now() if origin is None else origin
         self._tasks = [
             asyncio.create_task(self._heartbeats()),
             asyncio.create_task(self._fly()),
@@ -202,48 +178,9 @@ class MockAutopilot(MissionServer):
         if handler is not None:
             handler(link, message)
 
-    def _mission_replaced(self, marked: int | None) -> None:
-        """PX4 restarts at the item marked current (in flight too), else keeps its index;
-        ArduPilot ignores the mark: keeps its index in flight, item 1 on the ground."""
-        last = max(len(self.mission) - 1, 0)
-        before = self.current
-        if self.personality.home_is_item0:
-            self.current = min(self.current, last) if self.flying else min(1, last)
-        elif marked is not None:
-            self.current = min(marked, last)
-            self._hold_until, self._rtl_descending = None, False  # the item starts again
-        else:
-            self.current = min(self.current, last)
-        if self.current != before:
-            self._hold_until, self._rtl_descending = None, False
-        if len(self.mission) <= int(self.personality.home_is_item0):  # nothing left to fly
-            self.mission_running = False
-        self._jumps.clear()
-
-    def _mission_cleared(self) -> None:
-        self.current = 0
-        self.mission_running = False
-        self._jumps.clear()
-
-    def _set_current(self, seq: int) -> bool:
-        if not 0 <= seq < len(self.mission):
-            return False
-        if seq != self.current:
-            self._hold_until, self._rtl_descending = None, False
-        self.current = seq
-        return True
-
     def _on_mission_set_current(self, link: Link, m: Any) -> None:
         self._set_current(m.seq)
         self._reply(link, self.mav.mission_current_encode(self.current, len(self.mission), 0, 0))
-
-    def _startable(self) -> bool:
-        """Would the firmware fly this mission?  (PX4 denies a take-off at 0,0: "first
-        waypoint too far from home".)"""
-        p = self.personality
-        return bool(self.mission) and not (
-            p.problems(self.mission) or p.start_problems(self.mission)
-        )
 
     # commands
     def _on_command_long(self, link: Link, m: Any) -> None:
@@ -312,104 +249,6 @@ class MockAutopilot(MissionServer):
             self._start_mission()
             self.holding = False
         return int(mavlink.MAV_RESULT_ACCEPTED)
-
-    # ------------------------------------------------------------------ flight
-
-    def _target(self, item: MissionItem) -> tuple[float, float, float] | None:
-        """(lat, lon, metres above home) the vehicle flies to for this item, if any."""
-        if item.command == NAV_RETURN_TO_LAUNCH:  # home at the current height, then down
-            return self.home[0], self.home[1], 0.0 if self._rtl_descending else self.alt
-        if item.command == NAV_TAKEOFF and not item.has_position:
-            return self.lat, self.lon, item.z - (self.home[2] if item.frame in FRAMES_AMSL else 0)
-        if not item.has_position:
-            return None
-        alt = item.z - self.home[2] if item.frame in FRAMES_AMSL else item.z
-        if item.command == NAV_LAND:
-            alt = 0.0
-        return item.x / 1e7, item.y / 1e7, alt
-
-    def _go_to(self, index: int | None) -> None:
-        if index is None:
-            self.mission_running = False  # end of the mission: hold position (PX4: loiter)
-        else:
-            self.current = index
-        self._report_current()
-
-    def _step(self, dt: float) -> None:
-        f = self.flight
-        target = None
-        if self.mission_running and self.current < len(self.mission):
-            if self.ardupilot and self.current == 0:  # home is not flown to
-                self.current = 1
-                return
-            if self.mission[self.current].command == DO_JUMP:
-                self._go_to(self._resolve(self.current))
-                return
-            target = self._target(self.mission[self.current])
-            if target is None:  # an item without a position: done at once
-                self._advance()
-                return
-        elif self._takeoff_alt is not None:
-            target = (self.lat, self.lon, self._takeoff_alt)
-        if target is None or not self.flying:
-            return
-        north, east = ground_offset(self.lat, self.lon, target[0], target[1])
-        dist = math.hypot(north, east)
-        step = min(dist, f.cruise_m_s * dt)
-        if dist > 0:
-            self.lat, self.lon = moved(self.lat, self.lon, north * step / dist, east * step / dist)
-        dz = target[2] - self.alt
-        self.alt += max(-f.climb_m_s * dt, min(f.climb_m_s * dt, dz))
-        if dist - step <= f.acceptance_m and abs(target[2] - self.alt) <= 0.5:
-            if self.mission_running:
-                self._advance()
-            else:
-                self._takeoff_alt = None
-
-    def _advance(self) -> None:
-        """The current item is reached (or has no position): report it and go on."""
-        item = self.mission[self.current]
-        if item.command == NAV_LOITER_TIME and item.has_position:
-            if self._hold_until is None:
-                self._hold_until = self._sim_time + max(item.param1, 0.0)
-            if self._sim_time < self._hold_until:
-                return  # holding over the loiter point
-            self._hold_until = None
-        if item.command == NAV_RETURN_TO_LAUNCH and not self._rtl_descending:
-            self._rtl_descending = True  # over home: now land there
-            return
-        self.reached.append(self.current)
-        self._send(self.mav.mission_item_reached_encode(self.current))
-        if item.command in (NAV_LAND, NAV_RETURN_TO_LAUNCH):
-            self.alt, self.armed = 0.0, False
-            self.mission_running = self.flying = self._rtl_descending = False
-            self._report_current()
-        else:
-            self._go_to(self._resolve(self.current + 1))
-
-    def take_off(self) -> None:
-        """Armed, flying the mission from the current item (what arm + MISSION_START do)."""
-        self._start_mission()
-
-    def _start_mission(self) -> None:
-        if not self.flying:  # a new flight: the mission starts again, jump counters too
-            self._jumps.clear()
-        self.armed = self.flying = self.mission_running = True
-
-    def restart_clock(self, origin: float) -> None:
-        """Make ``origin`` (time.monotonic) simulated time zero and forget the track so far."""
-        self.origin, self._sim_time = origin, 0.0
-        self.trajectory.clear()
-
-    def advance(self, dt: float) -> None:
-        """One step of the flight model, recorded in the trajectory."""
-        self._sim_time += dt
-        self._step(dt)
-        self.trajectory.append((self._sim_time, self.lat, self.lon, self.home[2] + self.alt))
-
-    def sim_time(self) -> float:
-        """Simulated seconds since ``origin`` (shared by the vehicles of a replay)."""
-        return (time.monotonic() - self.origin) * self.flight.time_scale
 
     async def _fly(self) -> None:
         """Advance the model to the simulated time in steps of at most 0.5 s, whatever the

@@ -14,11 +14,11 @@ schedule, the same flight model stepped offline) gives the separations one would
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import socket
 import sys
 import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +32,7 @@ from ..planner import OffsetSettings
 from ..runtime import Companion, CompanionSettings
 from .fleet import make_fleet
 from .mock_autopilot import FlightModel, MockAutopilot
+from .paced_clock import PacedClock
 from .px4 import Px4Build
 from .report import Track, build_report
 from .scenario import Scenario, ScenarioError
@@ -138,7 +139,11 @@ async def run_replay(
     """Fly ``scenario``: mock autopilots, or PX4 SITL vehicles from the build ``px4`` (their
     speed factor, and so the replay's time scale, at most ``px4_speed_max``)."""
     ts = scenario.time_scale if px4 is None else min(scenario.time_scale, px4_speed_max)
-    clock = Clock(ts)
+    # Mocks fly on a clock paced by this process (a busy machine does not pass as flight
+    # time); PX4 SITL keeps lock-step real time, so with it the plain scaled clock.
+    paced = PacedClock(ts) if px4 is None else None
+    clock = paced or Clock(ts)
+    ticker = asyncio.create_task(paced.tick()) if paced is not None else None
     medium = SimMedium(Channel(Impairments(loss=scenario.loss), scenario.seed), clock)
     link = profile(scenario.link_profile)
     mocks: dict[int, ReplayVehicle] = {}
@@ -146,7 +151,7 @@ async def run_replay(
     vanished: dict[int, Companion] = {}
     autopilots: list[Autopilot] = []
     flight = FlightModel(cruise_m_s=scenario.cruise_m_s, time_scale=ts, rate_hz=20.0)
-    origin = time.monotonic()  # simulated time zero for every vehicle and the schedule
+    origin = clock.now()  # simulated time zero for every vehicle and the schedule
     state = tempfile.TemporaryDirectory(prefix="replay-state-")
     fleet = make_fleet(
         [(d.id, d.operator) for d in scenario.drones],
@@ -171,12 +176,18 @@ async def run_replay(
                     faults=d.faults,
                     bind_port=free_udp_port(),
                     send_port=free_udp_port(),
+                    clock=clock,
                 )
             else:
                 if d.ardupilot:
                     raise ScenarioError(f"drone {d.id}: PX4 SITL cannot fly an ArduPilot drone")
                 vehicle = Px4SitlVehicle(
-                    px4, d.mission, d.home, speed_factor=ts, cruise_m_s=scenario.cruise_m_s
+                    px4,
+                    d.mission,
+                    d.home,
+                    speed_factor=ts,
+                    cruise_m_s=scenario.cruise_m_s,
+                    clock=clock,
                 )
             mocks[d.id] = vehicle
             await vehicle.start(origin)
@@ -196,9 +207,12 @@ async def run_replay(
             )
             endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
             companions[d.id] = Companion(settings, endpoint, ap, fleet[d.id])
-            await companions[d.id].start()
-            say(f"drone {d.id}: {vehicle.kind} vehicle, MAVSDK and companion up")
-        origin = time.monotonic()  # simulated time zero: everything is up
+            say(f"drone {d.id}: {vehicle.kind} vehicle and MAVSDK up")
+        # The companions start together: one set up earlier would have the radio (and its
+        # first runs) to itself while the others' vehicles still start.
+        await asyncio.gather(*(companion.start() for companion in companions.values()))
+        say("companions up")
+        origin = clock.now()  # simulated time zero: everything is up
         for mock in mocks.values():
             mock.restart_clock(origin)
         for companion in companions.values():
@@ -206,7 +220,7 @@ async def run_replay(
         started: set[int] = set()
         told = {d.id: 0 for d in scenario.drones}  # companion events already told
         while True:
-            sim = (time.monotonic() - origin) * ts
+            sim = clock.now() - origin
             for ident, companion in companions.items():
                 for event in companion.events[told[ident] :]:
                     if event.kind in TOLD:
@@ -245,6 +259,11 @@ async def run_replay(
                 held[k] = []
         for vehicle in mocks.values():
             await vehicle.stop()
+        if paced is not None and ticker is not None:
+            ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await ticker
+            say(f"clock held back for {paced.lost_s:.1f} real s (stalls, inline computation)")
         state.cleanup()
     baseline = _fly_offline(scenario)
     return Replay(

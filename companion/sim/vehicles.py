@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import time
 from typing import Protocol
 
+from ..link.clock import Clock
 from ..mission import MissionItem
 from .mock_autopilot import Faults, FlightModel, MockAutopilot
 from .px4 import Px4Build, Px4Error, Px4Vehicle
@@ -62,6 +62,7 @@ class MockVehicle:
         faults: Faults,
         bind_port: int,
         send_port: int,
+        clock: Clock,
     ) -> None:
         self.mock = MockAutopilot(
             0,
@@ -72,6 +73,7 @@ class MockVehicle:
             faults=faults,
             bind_port=bind_port,
             send_port=send_port,
+            clock=clock,
         )
 
     @property
@@ -121,13 +123,15 @@ class Px4SitlVehicle:
         *,
         speed_factor: float,
         cruise_m_s: float,
+        clock: Clock,
     ) -> None:
         params = {"MPC_XY_CRUISE": cruise_m_s, "MPC_XY_VEL_MAX": max(cruise_m_s, 12.0)}
         self.vehicle = Px4Vehicle(build, home=home, speed_factor=speed_factor, params=params)
         self.mission = mission
         self.speed_factor = speed_factor
         self._track: Track = []
-        self._origin = time.monotonic()
+        self.clock = clock  # lock-step SITL keeps real time: the replay's plain scaled clock
+        self._origin = 0.0
         self._sampler: asyncio.Task[None] | None = None
 
     @property
@@ -156,7 +160,7 @@ class Px4SitlVehicle:
         while True:
             position = self.vehicle.position
             if position is not None:
-                now = (time.monotonic() - self._origin) * self.speed_factor
+                now = self.clock.now() - self._origin
                 self._track.append((now, *position))
             await asyncio.sleep(SAMPLE_S)
 

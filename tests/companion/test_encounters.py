@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from companion.beacon import Beacon
+from companion.core import box_radius_m
 from companion.failsafe import FailsafeSettings, at_risk, run_seconds, too_late
 from companion.flightpath import flight_path
 from companion.levels import assign, levels_mask, plan_levels
@@ -33,7 +34,7 @@ from companion.peers import (
 )
 from companion.planner import plan_offsets
 from companion.radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
-from companion.runtime import Companion, CompanionSettings, box_radius_m
+from companion.runtime import Companion, CompanionSettings
 from companion.sim.fleet import make_fleet
 from companion.sim.over_link import link_case
 from protocol.grid import GridKind, GridSpec

@@ -330,16 +330,16 @@ def test_a_drone_of_an_untrusted_operator_is_ignored(tmp_path: Path) -> None:
 def test_an_oversized_request_is_refused_before_any_work(tmp_path: Path, monkeypatch: Any) -> None:
     """A certified drone whose beacon says its path has at most 2 segments asks for a run of
     64, then of 256: refused (signed, SIZE) before drone 2 builds anything for it."""
-    import companion.runtime
+    import companion.bob_answers
 
     built: list[Any] = []
-    real_bob = companion.runtime.Bob
+    real_bob = companion.bob_answers.Bob
 
     def counting_bob(*args: Any, **kwargs: Any) -> Any:
         built.append(args)
         return real_bob(*args, **kwargs)
 
-    monkeypatch.setattr(companion.runtime, "Bob", counting_bob)
+    monkeypatch.setattr(companion.bob_answers, "Bob", counting_bob)
 
     async def main() -> tuple[World, list[Any]]:
         w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})

@@ -1,0 +1,184 @@
+"""Bob's side: answering a peer's run request.
+
+A request is admitted only once it has shown who asks (a trusted certificate, a signature, a
+fresh time, not a replay) and that the run is plausible and within the peer's budget; then
+Bob answers with the part of his path still to fly (:func:`companion.exchange.serve_bob`).
+What goes back otherwise is a one-byte abort code or a signed refusal, never anything about
+the path.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from protocol.errors import ProtocolError
+from protocol.intersection import Bob, State
+from protocol.wire import Hello
+
+from .auth.session import AuthenticationError, Init, Refusal, Responder, Route
+from .beacon import MAX_SIZE_CLASS
+from .budget import BOB, BudgetExceeded
+from .core import CompanionCore
+from .events import EventKind
+from .exchange import serve_bob
+from .link.arq import LinkError
+from .link.frames import AbortCode
+from .mission import point_as_segment
+from .progress import RunProgress
+from .radio import ANSWER_FULL, ANSWER_NEAR
+from .roles import Role
+
+log = logging.getLogger("companion")
+SETUPS_PER_PEER = 2
+
+
+class BobAnswers(CompanionCore):
+    """Answering as Bob."""
+
+    async def _serve(self) -> None:
+        while True:
+            peer, session = await self.endpoint.accept()
+            self._spawn(self._answer(peer, session))
+
+    def _bob_path(self, hello: Hello) -> list[tuple[int, int]]:
+        _, path = self._remaining_path()
+        return point_as_segment(self._near(path, hello.horizon_m))  # hovering: a point
+
+    async def _answer(self, peer: int, session: int) -> None:
+        """Answer a run request -- only once it has shown who asks (a trusted certificate, a
+        signature, a fresh time, not a replay) and that the run is plausible and within the
+        budget: nobody else makes us work, and what goes back is a one-byte abort code or a
+        signed refusal, never anything about our path."""
+        setups = self.chooser_setups.setdefault(peer, {})
+        self._answering += 1
+        try:
+            request = await self.endpoint.receive(peer, session)
+            admitted = await self._admit(peer, session, request)
+            if admitted is None:
+                return
+            responder, hello, ticket = admitted
+            async with self._radio.turn(ANSWER_NEAR if hello.horizon_m > 0 else ANSWER_FULL):
+                self._sessions += 1
+                bob = Bob(self._bob_path, keys=self.bob_keys, setups=setups, geographic=True)
+                try:
+                    with RunProgress(self.settings.node, self.endpoint, peer, Role.BOB):
+                        report = await serve_bob(
+                            self.endpoint,
+                            peer,
+                            session,
+                            bob,
+                            secure=responder,
+                            boot=self.boot,
+                            timeout=self.settings.run_timeout_s,
+                            first=responder.init.hello,
+                        )
+                finally:
+                    self._sessions -= 1
+                    if bob.state is not State.DONE:  # no last message: Alice learnt nothing
+                        self.ledger.refund(ticket)
+        except AuthenticationError as exc:
+            self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
+            return
+        except (ProtocolError, LinkError, ValueError) as exc:
+            self.record(EventKind.ANSWER_FAILED, peer=peer, error=str(exc))
+            return
+        except Exception as exc:  # nothing may stop the companion
+            log.exception("node %d: answering %d failed", self.settings.node, peer)
+            self.record(EventKind.ANSWER_FAILED, peer=peer, error=f"internal: {exc!r}")
+            return
+        finally:
+            self._answering -= 1
+            self._wake.set()
+            while len(setups) > SETUPS_PER_PEER:  # the oldest go first
+                setups.pop(next(iter(setups)))
+        if report.refused is not None:
+            self.record(EventKind.REFUSED, peer=peer, reason=report.refused.name)
+            return
+        self.record(
+            EventKind.ANSWERED,
+            peer=peer,
+            bytes=report.bytes_sent,
+            auth_bytes=report.auth_bytes_sent,
+        )
+
+    async def _admit(
+        self, peer: int, session: int, request: bytes
+    ) -> tuple[Responder, Hello, int] | None:
+        """The checks before any work on a request, cheapest first.  None: the request was
+        dropped, aborted (code only) or refused (signed), and the session is closed."""
+        wall = self.clock.wall()
+        skew = self.settings.max_clock_skew_s
+        try:
+            init = Init.parse(request)
+        except AuthenticationError as exc:
+            self.endpoint.abort(peer, session, AbortCode.AUTH)
+            self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
+            return None
+        responder = Responder(self.identity, init, Route(peer, self.settings.node, session))
+        neighbour = self.neighbours.get(peer)
+        known = self.peers.get(peer)
+        if neighbour is None or known is None or known.identity != neighbour.fingerprint:
+            if self.neighbours.untrusted(peer):  # ignored: not a word back
+                self.endpoint.close_session(peer, session)
+                return None
+            # A drone whose certificate (or beacon) we lack: say so -- signed, at most every
+            # half a beacon interval -- and ask for its certificate.
+            self._cert_wanted = True
+            self._cert_now.set()
+            if self.clock.now() - self._unknown_refused >= self._asked_every_s:
+                self._unknown_refused = self.clock.now()
+                await self._refuse(peer, session, responder, Refusal.UNKNOWN_PEER)
+            else:
+                self.endpoint.close_session(peer, session)
+            return None
+        # Fresh: made when its first frame could have left (a duty-cycled sender may wait
+        # up to a window for its budget); answered once (the replay cache on disk outlives
+        # the window).
+        wait = self.endpoint.profile.budget_wait_s
+        try:
+            responder.verify(neighbour.cert, self.endpoint.arrived(peer, session), skew, wait)
+            forget = wall - 2 * (skew + wait)
+            if not self.store.first_request(init.replay_key, wall, forget):
+                raise AuthenticationError("a request answered before (a replay)")
+        except AuthenticationError as exc:
+            self.endpoint.abort(peer, session, AbortCode.AUTH)
+            self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
+            return None
+        try:
+            hello = Hello.from_bytes(init.hello)
+        except ProtocolError as exc:
+            self.endpoint.abort(peer, session, AbortCode.PROTOCOL)
+            self.record(EventKind.ANSWER_FAILED, peer=peer, error=str(exc))
+            return None
+        if known.role is Role.ALICE:
+            if self.settings.node < peer:
+                # Both took the pair as Alice (their views of who was on the ground crossed):
+                # exactly one of a pair adjusts -- the lower node id keeps the role.
+                await self._refuse(peer, session, responder, Refusal.ROLE)
+                return None
+            self.record(EventKind.YIELDED, peer=peer, reason="the peer has the lower node id")
+        operator = neighbour.operator
+        allowed = min(operator.max_segments, 1 << min(known.beacon.size_class, MAX_SIZE_CLASS))
+        if hello.m > allowed:  # more than its beacon announced or its operator allows
+            await self._refuse(peer, session, responder, Refusal.SIZE)
+            return None
+        try:
+            ticket = self.ledger.admit(
+                known.identity, operator.key.fingerprint, operator.max_runs_per_hour, wall, BOB
+            )
+        except BudgetExceeded as exc:
+            self.record(EventKind.BUDGET, peer=peer, error=str(exc))
+            await self._refuse(peer, session, responder, Refusal.BUDGET)
+            return None
+        known.role = Role.BOB
+        known.conflicts.clear()  # as Bob we do not adjust for this peer
+        return responder, hello, ticket
+
+    async def _refuse(self, peer: int, session: int, responder: Responder, code: Refusal) -> None:
+        self.record(EventKind.REFUSED, peer=peer, reason=code.name)
+        try:
+            await self.endpoint.send(peer, session, responder.refuse(code))
+        except LinkError:
+            pass
+        finally:
+            self.endpoint.close_session(peer, session)
