@@ -15,10 +15,10 @@ import itertools
 import logging
 import math
 
+from protocol.compact_plan import message_sizes
 from protocol.errors import ProtocolError
 from protocol.grid import GridSpec
 from protocol.intersection import MAX_SEGMENTS, Alice, Limits
-from protocol.suite_compact import message_sizes
 from protocol.wire import Suite
 
 from .auth.certificate import Certificate

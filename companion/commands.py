@@ -273,7 +273,7 @@ def compare(args: argparse.Namespace) -> int:
 def bench_link(args: argparse.Namespace) -> int:
     from protocol.tools.bench_paths import DEFAULT_DATA
 
-    from .sim.over_link import bench_link, format_link
+    from .sim.bench_link import bench_link, format_link
 
     data = Path(args.data) if args.data else DEFAULT_DATA
     profiles = list(args.profiles) if args.profiles else None

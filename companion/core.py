@@ -20,10 +20,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from protocol.compact_plan import message_sizes
 from protocol.grid import GridSpec
 from protocol.intersection import BobKeys
 from protocol.ot.setup import DEFAULT_SECURITY, ChooserSetup, HolderSetup
-from protocol.suite_compact import message_sizes
 from protocol.wire import Suite
 
 from . import logs

@@ -3,7 +3,7 @@
 Before and during a run Alice compares two times:
 
 * the time the run still needs: its messages (their exact sizes are public before the run,
-  :func:`protocol.suite_compact.message_sizes`) as frames on the profile, acknowledgements,
+  :func:`protocol.compact_plan.message_sizes`) as frames on the profile, acknowledgements,
   turnarounds and the expected retransmissions, delayed further where her own duty-cycle
   budget runs out (the peer's is taken to be like hers); then the edit and the climb;
 * the worst-case time until the peer could be here (:func:`companion.peers.time_to_meet`).

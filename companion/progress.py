@@ -16,7 +16,8 @@ from collections.abc import Callable
 from dataclasses import astuple, dataclass
 
 from . import logs
-from .link.endpoint import LinkEndpoint, LinkStats
+from .link.endpoint import LinkEndpoint
+from .link.stats import LinkStats
 from .roles import Role
 
 log = logging.getLogger("companion.progress")

@@ -21,7 +21,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from companion.sim.over_link import bench_link, format_link
+from companion.sim.bench_link import bench_link, format_link
 from protocol.tools.bench import bench_crypto, format_crypto
 from protocol.tools.bench_paths import (
     bench_design,

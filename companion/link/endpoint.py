@@ -15,7 +15,6 @@ import logging
 import math
 import random
 import secrets
-from collections import deque
 from dataclasses import dataclass, field
 
 from .airtime import DutyCycle, LinkProfile
@@ -27,11 +26,11 @@ from .arq import (
     PeerAborted,
     RetransmissionTimer,
 )
+from .beacon_frames import BeaconParts, beacon_frames
 from .clock import Clock
 from .frames import (
     BROADCAST,
     MAX_ACK_BITMAP,
-    MAX_BEACON_FRAGMENTS,
     OVERHEAD,
     AbortCode,
     Flag,
@@ -43,16 +42,11 @@ from .frames import (
 )
 from .medium import Transport
 from .reassembly import Delivered, Receiver
+from .stats import LinkStats
+from .transmitter import Transmitter
 
 log = logging.getLogger("companion.link")
 _JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
-
-MAX_DEFER_S = 8.0  # listen before talk gives up waiting after this long (or three of the
-# profile's longest frames, if longer: at SF12 one frame is 8 s on the air)
-
-
-def _consume(future: asyncio.Future[float]) -> None:
-    future.exception()  # marks the exception retrieved
 
 
 @dataclass(frozen=True, slots=True)
@@ -75,33 +69,6 @@ class LinkConfig:
         if self.idle_timeout_s is not None:
             return self.idle_timeout_s
         return 3 * profile.duty_window_s + 600.0 if profile.duty_cycle else 300.0
-
-
-@dataclass
-class LinkStats:
-    frames_sent: int = 0
-    frames_retransmitted: int = 0
-    polls_sent: int = 0
-    acks_sent: int = 0
-    bytes_sent: int = 0
-    airtime_s: float = 0.0
-    duty_wait_s: float = 0.0
-    frames_received: int = 0
-    bytes_received: int = 0  # frames addressed to us, headers included
-    messages_sent: int = 0
-    messages_received: int = 0
-    dropped: dict[str, int] = field(default_factory=dict)
-
-    def drop(self, reason: str) -> None:
-        self.dropped[reason] = self.dropped.get(reason, 0) + 1
-
-
-@dataclass
-class _TxItem:
-    data: bytes
-    airtime: float
-    control: bool
-    done: asyncio.Future[float]
 
 
 @dataclass
@@ -148,9 +115,7 @@ class LinkEndpoint:
         )
         self.duty = DutyCycle(profile.budget_s, profile.duty_window_s, self.config.control_reserve)
         self.beacons: asyncio.Queue[tuple[int, bytes]] = asyncio.Queue(maxsize=64)
-        self._control: deque[_TxItem] = deque()
-        self._data: deque[_TxItem] = deque()
-        self._wake = asyncio.Event()
+        self.radio = Transmitter(transport, profile, self.duty, self.stats, self.clock)
         self._sessions: dict[tuple[int, int], _Session] = {}
         self._closed: dict[tuple[int, int], float] = {}
         self._aborted: dict[tuple[int, int], Frame] = {}
@@ -158,34 +123,28 @@ class LinkEndpoint:
         self._outgoing: dict[tuple[int, int, int], tuple[Outgoing, asyncio.Event]] = {}
         self._timers: dict[int, RetransmissionTimer] = {}
         self._tasks: list[asyncio.Task[None]] = []
-        self._running = False
         self._last_traffic = -math.inf
         self._beacon_seq = secrets.randbelow(256)
-        self._beacon_parts: dict[tuple[int, int, int], tuple[float, dict[int, bytes]]] = {}
+        self._beacon_parts = BeaconParts(self.stats)
 
     # ------------------------------------------------------------------ lifecycle
 
     async def start(self) -> None:
-        self._running = True
+        self.radio.running = True
         self.transport.set_receiver(self._on_bytes)
         self._tasks = [
-            asyncio.create_task(self._tx_loop(), name=f"link-tx-{self.node}"),
+            asyncio.create_task(self.radio.run(), name=f"link-tx-{self.node}"),
             asyncio.create_task(self._housekeeping(), name=f"link-gc-{self.node}"),
         ]
 
     async def close(self) -> None:
-        self._running = False
+        self.radio.running = False
         for task in self._tasks:
             task.cancel()
         for task in self._tasks:
             with contextlib.suppress(asyncio.CancelledError):
                 await task
-        for item in (*self._control, *self._data):
-            if not item.done.done():  # a sender waiting on it gets the error, nobody else
-                item.done.set_exception(LinkError("link endpoint closed"))
-                item.done.add_done_callback(_consume)
-        self._control.clear()
-        self._data.clear()
+        self.radio.fail_pending(LinkError("link endpoint closed"))
         await self.transport.close()
 
     async def __aenter__(self) -> LinkEndpoint:
@@ -227,7 +186,7 @@ class LinkEndpoint:
         """Tell the peer the session is over (three copies, and again whenever it asks for an
         ACK in this session) and close it here."""
         frame = Frame(FrameType.ABORT, self.node, peer, session, payload=abort_payload(code))
-        for _ in range(3 if self._running else 0):
+        for _ in range(3 if self.radio.running else 0):
             self._enqueue(frame, control=True)
         self.close_session(peer, session)
         self._aborted[(peer, session)] = frame  # repeated to whoever still asks (like a RST)
@@ -347,27 +306,9 @@ class LinkEndpoint:
         """Broadcast one beacon (unacknowledged; it spends the data budget, not the reserve
         kept for acknowledgements): one frame, or a few fragments where the profile's frames
         are small (US915 SF9), which a receiver puts together or drops whole."""
-        count = max(1, -(-len(payload) // self.payload_size))
-        if count > MAX_BEACON_FRAGMENTS:
-            raise MessageTooLarge(f"beacon of {len(payload)} bytes needs {count} frames")
         seq, self._beacon_seq = self._beacon_seq, (self._beacon_seq + 1) & 0xFF
-        size = self.payload_size
-        done = [
-            self._enqueue(
-                Frame(
-                    FrameType.BEACON,
-                    self.node,
-                    BROADCAST,
-                    0,
-                    seq,
-                    i,
-                    count,
-                    payload[i * size : (i + 1) * size],
-                ),
-                control=False,
-            )
-            for i in range(count)
-        ]
+        frames = beacon_frames(self.node, seq, payload, self.payload_size)
+        done = [self._enqueue(frame, control=False) for frame in frames]
         for sent in done:
             await sent
 
@@ -397,53 +338,7 @@ class LinkEndpoint:
     # ------------------------------------------------------------------ radio
 
     def _enqueue(self, frame: Frame, *, control: bool) -> asyncio.Future[float]:
-        if not self._running:
-            raise LinkError("link endpoint is not running")
-        data = frame.encode()
-        done: asyncio.Future[float] = asyncio.get_running_loop().create_future()
-        item = _TxItem(data, self.profile.airtime(len(data)), control, done)
-        (self._control if control else self._data).append(item)
-        self._wake.set()
-        return done
-
-    async def _tx_loop(self) -> None:
-        deferred_since: float | None = None
-        patience = max(MAX_DEFER_S, 3 * self.profile.airtime(self.frame_size))
-        while True:
-            queue = self._control if self._control else self._data
-            if not queue:
-                self._wake.clear()
-                await self._wake.wait()
-                continue
-            item = queue[0]
-            now = self.clock.now()
-            start = self.duty.earliest(now, item.airtime, control=item.control)
-            if start > now:
-                self._wake.clear()
-                with contextlib.suppress(TimeoutError):
-                    await self.clock.wait_for(self._wake.wait(), start - now)
-                self.stats.duty_wait_s += self.clock.now() - now
-                continue  # re-evaluate: a control frame may have arrived
-            sense = getattr(self.transport, "channel_busy", None)
-            if deferred_since is None:
-                deferred_since = now
-            if sense is not None and sense() and now - deferred_since < patience:
-                # Listen before talk: another radio is on the air (LoRa channel activity
-                # detection).  Back off a random few frames' worth and look again.
-                await self.clock.sleep(_JITTER.uniform(0.02, 0.25))
-                continue
-            deferred_since = None
-            queue.popleft()
-            if item.done.cancelled():
-                continue
-            self.duty.record(now, item.airtime)
-            await self.transport.transmit(item.data, item.airtime)
-            self.stats.frames_sent += 1
-            self.stats.bytes_sent += len(item.data)
-            self.stats.airtime_s += item.airtime
-            if not item.done.done():
-                item.done.set_result(self.clock.now())
-            await self.clock.sleep(self.profile.turnaround_s)
+        return self.radio.enqueue(frame.encode(), control=control)
 
     async def _housekeeping(self) -> None:
         while True:
@@ -499,29 +394,11 @@ class LinkEndpoint:
                         event.set()
             self.receiver.forget_session(*key)
         elif frame.type is FrameType.BEACON:
-            payload = self._beacon_fragment(frame, now)
+            payload = self._beacon_parts.add(frame, now)
             if payload is not None:
                 if self.beacons.full():
                     self.beacons.get_nowait()
                 self.beacons.put_nowait((frame.src, payload))
-
-    def _beacon_fragment(self, frame: Frame, now: float) -> bytes | None:
-        """A whole beacon once all its fragments are in (a few seconds at most; partial
-        beacons are bounded in number and age, and dropped whole)."""
-        if frame.count == 1:
-            return frame.payload
-        for key in [k for k, (t, _) in self._beacon_parts.items() if now - t > 30.0]:
-            del self._beacon_parts[key]
-        key = (frame.src, frame.seq, frame.count)
-        _, parts = self._beacon_parts.setdefault(key, (now, {}))
-        parts[frame.index] = frame.payload
-        if len(parts) == frame.count and all(i in parts for i in range(frame.count)):
-            del self._beacon_parts[key]
-            return b"".join(parts[i] for i in range(frame.count))
-        while len(self._beacon_parts) > 16:
-            self.stats.drop("beacon_partial")
-            del self._beacon_parts[next(iter(self._beacon_parts))]
-        return None
 
     def _deliver(self, message: Delivered, now: float) -> None:
         key = (message.src, message.session)

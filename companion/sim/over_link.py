@@ -13,11 +13,8 @@ identities; ``auth_bytes`` says what that added.
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import functools
 import itertools
-import statistics
-import sys
 import tempfile
 from collections.abc import Sequence
 from dataclasses import asdict
@@ -25,15 +22,13 @@ from pathlib import Path
 from typing import Any
 
 from protocol.geometry import path_hits
-from protocol.grid import GridKind, GridSpec
+from protocol.grid import GridSpec
 from protocol.intersection import Limits
-from protocol.tools.bench_paths import DEFAULT_DATA, random_path
-from protocol.tools.compare import Case, Party, compare, load_cases
+from protocol.tools.compare import Case, Party, compare
 from protocol.tools.formats import InputFormatError
 from protocol.wire import Suite
 
 from ..auth.session import Identity, Init, Initiator, Responder, Route
-from ..beacon_budget import beacon_costs
 from ..exchange import RunReport, run_alice, serve_bob
 from ..flightpath import flight_path
 from ..link import (
@@ -45,10 +40,8 @@ from ..link import (
     LinkEndpoint,
     LinkProfile,
     SimMedium,
-    profile,
     run_simulated,
 )
-from ..link.frames import OVERHEAD
 from ..mission import MissionError
 from ..missionfile import read_mission_file
 from .fleet import make_fleet
@@ -166,171 +159,13 @@ def link_case(
     )
 
 
-# ---------------------------------------------------------------------------- bench link
-
-LOSSES = (0.0, 0.1, 0.3)
-
-
-def _say(progress: bool, message: str) -> None:
-    if progress:
-        print(f"  ... {message}", file=sys.stderr, flush=True)
-
-
-def _row(
-    profile_name: str, loss: float, workload: str, runs: list[dict[str, Any]]
-) -> dict[str, Any]:
-    def med(key: str) -> float:
-        return float(statistics.median(r[key] for r in runs))
-
-    return {
-        "profile": profile_name,
-        "loss": loss,
-        "workload": workload,
-        "runs": len(runs),
-        "correct": sum(r["hits"] == r["plain_hits"] for r in runs),
-        "frames_sent": med("frames_sent"),
-        "frames_retransmitted": med("frames_retransmitted"),
-        "bytes_on_air": med("bytes_on_air"),
-        "auth_bytes": med("auth_bytes"),
-        "message_bytes": med("bytes_alice_to_bob") + med("bytes_bob_to_alice"),
-        "airtime_s": med("airtime_s"),
-        "wall_s_simulated": med("wall_s_simulated"),
-        "cpu_s": med("cpu_s_alice") + med("cpu_s_bob"),
-    }
-
-
-def bench_link(
-    data: Path = DEFAULT_DATA,
-    profiles: Sequence[str] | None = None,
-    losses: Sequence[float] = LOSSES,
-    suite: str = "compact",
-    size: int = 8,
-    range_: int = 99,
-    seed: int = 1,
-    progress: bool = True,
-) -> dict[str, Any]:
-    """The paper's 30 pairs and one size x size random case over each profile and loss."""
-    if not (data / "alices_segments.txt").exists():
-        raise InputFormatError(f"no benchmark data in {data} (use --data DIR)")
-    profiles = list(profiles or PROFILES)
-    for name in profiles:
-        profile(name)  # unknown names fail before any work
-    _say(progress, f"generating keys ({suite})")
-    party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
-    pairs = load_cases(data / "alices_segments.txt", data / "bobs_segments.txt")
-    grid = GridSpec(GridKind.PLANE, range_)
-    paths = Case(random_path(size, range_), random_path(size, range_), grid)
-    rows = []
-    for name in profiles:
-        link = PROFILES[name]
-        for loss in losses:
-            imp = Impairments(loss=loss)
-            _say(progress, f"{name}, loss {loss:.0%}: paper pairs")
-            runs = [link_case(c, party, link, imp, seed + k) for k, c in enumerate(pairs)]
-            rows.append(_row(name, loss, "paper pair", runs))
-            if party.setup is not None:  # two drones that never met: a fresh OT setup
-                _say(progress, f"{name}, loss {loss:.0%}: paper pairs, first contact")
-                fresh = dataclasses.replace(party, setup=None, setups={})
-                runs = [
-                    link_case(c, dataclasses.replace(fresh, setups={}), link, imp, seed + k)
-                    for k, c in enumerate(pairs)
-                ]
-                rows.append(_row(name, loss, "paper pair, first contact", runs))
-            _say(progress, f"{name}, loss {loss:.0%}: {size} x {size} paths")
-            rows.append(
-                _row(name, loss, f"{size}x{size}", [link_case(paths, party, link, imp, seed)])
-            )
-    return {
-        "suite": suite,
-        "profiles": {
-            n: {
-                "description": PROFILES[n].description,
-                "frame_bytes": PROFILES[n].max_frame,
-                "payload_bytes": PROFILES[n].max_frame - OVERHEAD,
-                "frame_airtime_s": PROFILES[n].airtime(PROFILES[n].max_frame),
-                "header_share_of_airtime": header_share(PROFILES[n]),
-                "duty_cycle": PROFILES[n].duty_cycle,
-                "dwell_s": PROFILES[n].dwell_s,
-            }
-            for n in profiles
-        },
-        "grid_range": range_,
-        "rows": rows,
-        "beacons": {n: [asdict(c) for c in beacon_costs(PROFILES[n])] for n in profiles},
-    }
-
-
-def header_share(link: LinkProfile) -> float:
-    """Share of a full frame's airtime spent on the link header and CRC."""
-    full = link.airtime(link.max_frame)
-    return (full - link.airtime(link.max_frame - OVERHEAD)) / full
-
-
-def _duration(seconds: float) -> str:
+def duration_text(seconds: float) -> str:
+    """Seconds, minutes or hours, whichever reads best."""
     if seconds < 120:
         return f"{seconds:.1f} s"
     if seconds < 7200:
         return f"{seconds / 60:.1f} min"
     return f"{seconds / 3600:.1f} h"
-
-
-def format_link(result: dict[str, Any]) -> str:
-    lines = [
-        f"Link benchmark, suite {result['suite']}: medians per run; a paper pair is one "
-        f"1 x 1 comparison (keys included; the compact suite's one-time OT setup made before, "
-        f"as between drones that met; 'first contact': with a fresh OT setup), "
-        f"{result['rows'][-1]['workload']} one run (a single run, range "
-        f"+-{result['grid_range']}).",
-        "",
-        "| profile | frame B | header share of airtime | duty cycle | dwell |",
-        "|---|---:|---:|---|---|",
-    ]
-    for name, p in result["profiles"].items():
-        duty = f"{p['duty_cycle']:.0%}" if p["duty_cycle"] else "none"
-        dwell = f"{p['dwell_s'] * 1000:.0f} ms" if p["dwell_s"] else "none"
-        share = p["header_share_of_airtime"]
-        lines.append(f"| {name} | {p['frame_bytes']} | {share:.1%} | {duty} | {dwell} |")
-    lines += [
-        "",
-        "Runs are authenticated (signed key exchange on the first two messages, a 16-byte tag "
-        "on every message): 'auth B' is what that adds to the protocol's messages, and its "
-        "share of them.",
-        "",
-        "| profile | loss | workload | correct | frames | retransmitted | frames vs 0 % "
-        "| auth B | airtime | simulated time |",
-        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    base: dict[tuple[str, str], float] = {}
-    for r in result["rows"]:
-        key = (r["profile"], r["workload"])
-        if r["loss"] == 0:
-            base[key] = r["frames_sent"]
-        ratio = r["frames_sent"] / base[key] if key in base else float("nan")
-        added = r["auth_bytes"] / (r["message_bytes"] - r["auth_bytes"])
-        lines.append(
-            f"| {r['profile']} | {r['loss']:.0%} | {r['workload']} | {r['correct']}/{r['runs']} "
-            f"| {r['frames_sent']:.0f} | {r['frames_retransmitted']:.0f} | {ratio:.2f}x "
-            f"| {r['auth_bytes']:.0f} (+{added:.1%}) "
-            f"| {_duration(r['airtime_s'])} | {_duration(r['wall_s_simulated'])} |"
-        )
-    lines += [
-        "",
-        "Beacons (payload bytes, frames, airtime each; share: of the channel's time, or of the "
-        "duty-cycle budget under EU868, if every beacon at the profile's interval -- 10 s, "
-        "stretched under a duty cycle -- were of that kind; most are tagged, a signed one goes "
-        "out at the start, when a new drone is heard and every 5 minutes (or 30th beacon), "
-        "certificates when asked for):",
-        "",
-        "| profile | beacon | bytes | frames | airtime | share |",
-        "|---|---|---:|---:|---:|---:|",
-    ]
-    for name, costs in result["beacons"].items():
-        for c in costs:
-            lines.append(
-                f"| {name} | {c['kind']} | {c['payload_bytes']} | {c['frames']} "
-                f"| {c['airtime_s'] * 1000:.0f} ms | {c['share']:.1%} |"
-            )
-    return "\n".join(lines)
 
 
 def flown_points(path: Path) -> tuple[tuple[int, int], ...]:
@@ -396,8 +231,8 @@ def radio_demo(profiles: Sequence[str] = ("eu868-sf7", "us915-sf7"), loss: float
         ok &= r["hits"] == r["plain_hits"]
         print(
             f"| {name} | {r['hits'] == r['plain_hits']} | {r['frames_sent']} "
-            f"| {r['frames_retransmitted']} | {_duration(r['airtime_s'])} "
-            f"| {_duration(r['wall_s_simulated'])} |"
+            f"| {r['frames_retransmitted']} | {duration_text(r['airtime_s'])} "
+            f"| {duration_text(r['wall_s_simulated'])} |"
         )
     print(
         "Under the EU868 1 % duty cycle a drone may transmit 36 s per hour: bytes, not CPU, "

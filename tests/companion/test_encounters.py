@@ -37,8 +37,8 @@ from companion.radio import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioT
 from companion.runtime import Companion, CompanionSettings
 from companion.sim.fleet import make_fleet
 from companion.sim.over_link import link_case
+from protocol.compact_plan import message_sizes
 from protocol.grid import GridKind, GridSpec
-from protocol.suite_compact import message_sizes
 from protocol.tools.compare import Case, Party
 from protocol.wire import Suite
 

@@ -264,7 +264,7 @@ def test_oversized_peer_keys_are_refused(keys: Any) -> None:
     ("m", "n", "fresh"), [(1, 1, True), (2, 1, False), (4, 4, False), (3, 5, True)]
 )
 def test_message_sizes_are_known_before_the_run(m: int, n: int, fresh: bool, ot_pair: Any) -> None:
-    from protocol.suite_compact import message_sizes
+    from protocol.compact_plan import message_sizes
 
     grid = GridSpec(GridKind.PLANE, 2000)
     alice_path = tuple((i * 7, (i * 13) % 50) for i in range(m + 1))

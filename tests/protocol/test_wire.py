@@ -8,10 +8,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from protocol.compact_plan import Offer
 from protocol.errors import RemoteProtocolError
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob, State
-from protocol.suite_compact import Offer
 from protocol.tools.loopback import run_paths
 from protocol.wire import HEADER_SIZE, Hello, MsgType, Suite, frame, unframe
 

@@ -19,7 +19,7 @@ from companion.beacon import keys_hash as beacon_keys_hash
 from companion.exchange import RunReport, run_alice
 from companion.flightpath import flight_path
 from companion.link import PROFILES, Channel, Clock, Impairments, LinkEndpoint, SimMedium
-from companion.link.frames import OVERHEAD, Flag, Frame, FrameType, decode_frame
+from companion.link.frames import OVERHEAD, AbortCode, Flag, Frame, FrameType, decode_frame
 from companion.mission import MissionItem
 from companion.missionfile import read_plan
 from companion.runtime import Companion, CompanionSettings, Credentials
@@ -255,3 +255,9 @@ class Rogue:
             if frame.type is FrameType.DATA and frame.src == victim and frame.dst == self.node:
                 sizes[frame.seq] = sizes.get(frame.seq, 0) + len(frame.payload)
         return report, [sizes[k] for k in sorted(sizes)]
+
+
+def aborts_are_codes(w: World) -> None:
+    """Nothing but a one-byte code in any abort on the air (no text, no position)."""
+    for frame in w.sniffer.of(FrameType.ABORT):
+        assert len(frame.payload) == 1 and frame.payload[0] in set(AbortCode)

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from companion.link.airtime import PROFILES, DutyCycle, lora_airtime, profile
 from companion.link.frames import OVERHEAD
-from companion.sim.over_link import header_share
+from companion.sim.bench_link import header_share
 
 
 @pytest.mark.parametrize(

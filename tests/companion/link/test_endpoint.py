@@ -251,7 +251,7 @@ def test_an_aborted_session_answers_late_requests_with_abort() -> None:
             await p.a.send(2, session, b"hello")
             peer, sess = await p.b.accept()
             p.b.abort(peer, sess, AbortCode.PROTOCOL)
-            p.b._control.clear()  # the three copies never make it to the air
+            p.b.radio._control.clear()  # the three copies never make it to the air
             with pytest.raises(PeerAborted, match="protocol"):
                 await p.a.send(2, session, b"more")
 

@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from companion.link import PROFILES
-from companion.sim.over_link import bench_link, format_link, link_case
+from companion.sim.bench_link import bench_link, format_link
+from companion.sim.over_link import link_case
 from protocol.tools.bench_paths import DEFAULT_DATA
 from protocol.tools.compare import Party, load_cases
 from protocol.wire import Suite
