@@ -230,14 +230,14 @@ def replay(args: argparse.Namespace) -> int:
     )
     report = replay.report
     if args.out:
-        cli.write_atomic(args.out, json.dumps(report, indent=2) + "\n")
+        cli.write_atomic(args.out, json.dumps(report.to_json(), indent=2) + "\n")
     if args.plot:
         plot_report(replay, args.plot)
     if args.export:
         for path in export(replay, args.export):
             print(f"wrote {path}", file=sys.stderr)
-    print(json.dumps(report, indent=2) if args.json else format_report(report))
-    return cli.EXIT_OK if report["ok"] else cli.EXIT_NEGATIVE
+    print(json.dumps(report.to_json(), indent=2) if args.json else format_report(report))
+    return cli.EXIT_OK if report.ok else cli.EXIT_NEGATIVE
 
 
 def compare(args: argparse.Namespace) -> int:

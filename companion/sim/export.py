@@ -61,27 +61,27 @@ def features(replay: Replay) -> list[dict[str, Any]]:
             }
         )
 
-    for drone in report["drones"]:
-        ident = drone["id"]
+    for drone in report.drones:
+        ident = drone.id
         flown = [(lat, lon, alt) for _, lat, lon, alt in tracks.flown[ident]]
         ground = flown[0][2] if flown else 0.0
         planned = _planned(tracks.paths[ident], ground)
         line(planned, drone=ident, kind="planned path", altitude="ground level")
         if len(flown) > 1:
             line(flown, drone=ident, kind="flown track", altitude="m AMSL")
-        for k in drone["flagged_segments"]:
+        for k in drone.flagged_segments:
             if k + 1 < len(planned):
                 line(planned[k : k + 2], drone=ident, kind="flagged segment", segment=k)
-    for pair in report["pairs"]:
-        a, b = pair["drones"]
-        when = pair["closest_approach_t_s"]
+    for pair in report.pairs:
+        a, b = pair.drones
+        when = pair.closest_approach_t_s
         ends = [_at(tracks.flown[d], when) for d in (a, b)]
         if all(e is not None for e in ends):
             line(
                 [e for e in ends if e is not None],
                 kind="closest approach",
                 drones=[a, b],
-                distance_m=pair["closest_approach_m"],
+                distance_m=pair.closest_approach_m,
                 t_s=when,
             )
     return out
@@ -100,8 +100,8 @@ def kml(replay: Replay, placemarks: list[dict[str, Any]]) -> str:
     ET.register_namespace("", KML_NS)
     root = ET.Element(f"{{{KML_NS}}}kml")
     doc = ET.SubElement(root, f"{{{KML_NS}}}Document")
-    ET.SubElement(doc, f"{{{KML_NS}}}name").text = f"replay {replay.report['scenario']}"
-    order = {d["id"]: n for n, d in enumerate(replay.report["drones"])}
+    ET.SubElement(doc, f"{{{KML_NS}}}name").text = f"replay {replay.report.scenario}"
+    order = {d.id: n for n, d in enumerate(replay.report.drones)}
     for feature in placemarks:
         props = feature["properties"]
         kind = props["kind"]

@@ -6,8 +6,8 @@ import itertools
 import math
 from pathlib import Path
 
+from .metrics import Track, closest, enu
 from .replay import Replay
-from .report import Track, closest, enu
 from .scenario import ScenarioError
 
 MARKERS = {
@@ -44,12 +44,12 @@ def plot_report(replay: Replay, out: str | Path) -> None:
 
     fig, (ground, gap, height) = plt.subplots(1, 3, figsize=(19, 6))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    colour = {d["id"]: colours[n % len(colours)] for n, d in enumerate(report["drones"])}
-    for drone in report["drones"]:
-        ident, c = drone["id"], colour[drone["id"]]
+    colour = {d.id: colours[n % len(colours)] for n, d in enumerate(report.drones)}
+    for drone in report.drones:
+        ident, c = drone.id, colour[drone.id]
         path = [en(lat / 1e7, lon / 1e7) for lat, lon in tracks.paths[ident]]
         ground.plot(*zip(*path, strict=True), "o--", color=c, lw=0.8, ms=3, alpha=0.6)
-        for k in drone["flagged_segments"]:
+        for k in drone.flagged_segments:
             (x0, y0), (x1, y1) = path[k], path[k + 1]
             ground.plot([x0, x1], [y0, y1], color="red", lw=6, alpha=0.25)
         flown = [en(lat, lon) for _, lat, lon, _ in tracks.flown[ident]]
@@ -62,24 +62,24 @@ def plot_report(replay: Replay, out: str | Path) -> None:
                     tail,
                     arrowprops={"arrowstyle": "-|>", "color": c, "mutation_scale": 18, "lw": 0},
                 )
-    for pair in report["pairs"]:
-        a, b = pair["drones"]
+    for pair in report.pairs:
+        a, b = pair.drones
         _, t, pa, pb = closest(tracks.flown[a], tracks.flown[b])
-        if math.isfinite(pair["closest_approach_m"]):
+        if math.isfinite(pair.closest_approach_m):
             (xa, ya), (xb, yb) = en(pa[0], pa[1]), en(pb[0], pb[1])
             ground.plot([xa, xb], [ya, yb], "k:", lw=1)
             ground.plot([xa, xb], [ya, yb], "kx", ms=8)
             ground.annotate(
-                f"{a}-{b}: {pair['closest_approach_m']:.1f} m at {t:.0f} s", (xa, ya), fontsize=7
+                f"{a}-{b}: {pair.closest_approach_m:.1f} m at {t:.0f} s", (xa, ya), fontsize=7
             )
     ground.plot([], [], color="red", lw=6, alpha=0.25, label="flagged segments")
     ground.plot([], [], "kx", label="closest approach")
-    ground.set(xlabel="east (m)", ylabel="north (m)", title=f"{report['scenario']}: ground tracks")
+    ground.set(xlabel="east (m)", ylabel="north (m)", title=f"{report.scenario}: ground tracks")
     ground.set_aspect("equal", adjustable="datalim")
     ground.legend(loc="best", fontsize=7)
 
-    for pair in report["pairs"]:
-        a, b = pair["drones"]
+    for pair in report.pairs:
+        a, b = pair.drones
         for which, style in ((tracks.flown, "-"), (tracks.baseline, ":")):
             series = _separation(which[a], which[b])
             if series:
@@ -89,26 +89,24 @@ def plot_report(replay: Replay, out: str | Path) -> None:
                     lw=1.4 if style == "-" else 1,
                     label=f"{a}-{b} {'with' if style == '-' else 'without'} companion",
                 )
-        for drone in report["drones"]:
-            if drone["id"] not in (a, b):
+        for drone in report.drones:
+            if drone.id not in (a, b):
                 continue
-            other = b if drone["id"] == a else a
-            for event in drone["timeline"]:
+            other = b if drone.id == a else a
+            for event in drone.timeline:
                 if event["kind"] in MARKERS and event.get("peer", other) == other:
                     marker, _ = MARKERS[event["kind"]]
-                    gap.axvline(event["t_s"], color=colour[drone["id"]], lw=0.4, alpha=0.5)
-                    gap.plot(
-                        event["t_s"], 0, marker, color=colour[drone["id"]], ms=8, clip_on=False
-                    )
+                    gap.axvline(event["t_s"], color=colour[drone.id], lw=0.4, alpha=0.5)
+                    gap.plot(event["t_s"], 0, marker, color=colour[drone.id], ms=8, clip_on=False)
     for marker, label in MARKERS.values():
         gap.plot([], [], marker, color="grey", label=label)
-    gap.axhline(report["offset_m"], color="red", lw=0.8, ls="--", label="offset")
+    gap.axhline(report.offset_m, color="red", lw=0.8, ls="--", label="offset")
     gap.set(xlabel="simulated time (s)", ylabel="3-D distance (m)", title="distance of each pair")
     gap.set_yscale("symlog", linthresh=20)
     gap.legend(loc="best", fontsize=7)
 
-    for drone in report["drones"]:
-        ident, c = drone["id"], colour[drone["id"]]
+    for drone in report.drones:
+        ident, c = drone.id, colour[drone.id]
         for which, style, label in (
             (tracks.baseline, "--", "planned"),
             (tracks.flown, "-", "flown"),

@@ -4,11 +4,12 @@
 (:mod:`companion.sim.scenario`) gets a :class:`~companion.sim.mock_autopilot.MockAutopilot` on
 loopback UDP (or a PX4 SITL vehicle, :mod:`companion.sim.px4`), a
 :class:`~companion.autopilot.Autopilot` (MAVSDK) and a :class:`~companion.runtime.Companion` on
-the shared simulated channel.  The missions are flown in scaled time until every drone has
-finished or the time limit passes.  A baseline without companions (same missions, same
-schedule, the same flight model stepped offline) gives the separations one would have had;
-:mod:`companion.sim.report` turns both into the report, :mod:`companion.sim.plot` and
-:mod:`companion.sim.export` into figures and files.
+the shared simulated channel.  The missions are flown in scaled time (mocks: on a paced clock,
+:mod:`companion.sim.paced_clock`) until every drone has finished or the time limit passes.  A
+baseline without companions (same missions, same schedule, the same flight model stepped
+offline) gives the separations one would have had; :mod:`companion.sim.metrics` measures both
+into the typed report (:mod:`companion.sim.report`), :mod:`companion.sim.plot` and
+:mod:`companion.sim.export` make figures and files of it.
 """
 
 from __future__ import annotations
@@ -21,7 +22,6 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from ..autopilot import Autopilot
 from ..autopilots import personality
@@ -31,10 +31,11 @@ from ..link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
 from ..planner import OffsetSettings
 from ..runtime import Companion, CompanionSettings
 from .fleet import make_fleet
+from .metrics import Track, build_report
 from .mock_autopilot import FlightModel, MockAutopilot
 from .paced_clock import PacedClock
 from .px4 import Px4Build
-from .report import Track, build_report
+from .report import ReplayReport
 from .scenario import Scenario, ScenarioError
 from .vehicles import MockVehicle, Px4SitlVehicle, ReplayVehicle
 
@@ -57,7 +58,7 @@ class Tracks:
 
 @dataclass(frozen=True)
 class Replay:
-    report: dict[str, Any]  # what --json prints
+    report: ReplayReport  # its to_json() is what --json prints
     tracks: Tracks
 
 

@@ -25,7 +25,7 @@ def test_crossing_on_two_px4_vehicles(px4_build: Px4Build) -> None:
     scenario = load_scenario(SCENARIOS / "crossing.toml")
     # at SIH's 10x: nothing on this scenario is close to a deadline (the default cap of 5 is
     # for in-flight encounters, where the companions' CPU time counts in simulated time)
-    report = asyncio.run(run_replay(scenario, px4=px4_build, px4_speed_max=10.0)).report
+    report = asyncio.run(run_replay(scenario, px4=px4_build, px4_speed_max=10.0)).report.to_json()
     assert report["finished"], report
     assert report["time_scale"] == 10.0  # the scenario's 40x capped at SIH's 10x
     first, second = report["drones"]

@@ -227,7 +227,7 @@ def _drone(scenario: Scenario, ident: int, **changes: object) -> Scenario:
 @pytest.mark.slow
 def test_fault_rejected_upload_keeps_the_old_mission() -> None:
     scenario = _drone(_crossing(), 1, faults=Faults(reject_upload=mavlink.MAV_MISSION_NO_SPACE))
-    report = asyncio.run(run_replay(scenario)).report
+    report = asyncio.run(run_replay(scenario)).report.to_json()
     alice = report["drones"][0]
     assert alice["runs"] and alice["flagged_segments"] == []  # planned, but never applied
     assert any(f["kind"] == "upload_failed" for f in alice["failures"])
@@ -242,7 +242,7 @@ def test_fault_peer_vanishes_mid_run() -> None:
     is by now: with no run under way, the fail-safe's guard climbs over what it could reach."""
     # while they compare (discovery, with certificates, takes one to a few beacon intervals)
     scenario = _drone(_crossing(), 2, companion_stop_s=35.0)
-    report = asyncio.run(run_replay(scenario)).report
+    report = asyncio.run(run_replay(scenario)).report.to_json()
     alice = report["drones"][0]
     assert any(f["kind"] == "run_failed" for f in alice["failures"])
     assert not alice["runs"]  # no result
@@ -259,7 +259,7 @@ def test_fault_link_at_30_percent_loss() -> None:
     inspection = scenario.drones[1]
     longer = [it.replace(param1=700.0) if it.command == 19 else it for it in inspection.mission]
     scenario = _drone(_drone(scenario, 2, mission=longer), 1, takeoff_delay_s=400.0)
-    report = asyncio.run(run_replay(scenario)).report
+    report = asyncio.run(run_replay(scenario)).report.to_json()
     alice = report["drones"][0]
     assert alice["flagged_segments"] == alice["conflicting_segments"] == [0]
     assert alice["vehicle_holds"] == "edited"
@@ -276,7 +276,7 @@ def test_failsafe_climbs_when_the_result_cannot_arrive_in_time() -> None:
     """EU868 SF12 under the 1 % duty cycle: a first run takes hours of regulated airtime.
     Drone 1 sees it cannot know in time and climbs over what drone 2 can reach."""
     scenario = _in_flight("inflight_crossing", link_profile="eu868-sf12", time_limit_s=200.0)
-    report = asyncio.run(run_replay(scenario)).report
+    report = asyncio.run(run_replay(scenario)).report.to_json()
     alice = report["drones"][0]
     assert report["precautionary_actions"] >= 1
     action = alice["precautionary"][0]
@@ -294,7 +294,7 @@ def test_failsafe_acts_when_the_peer_falls_silent_mid_run() -> None:
     The overdue run and the silent peer (it may have flown on at cruise speed since it was
     last heard) make drone 1 climb before the crossing."""
     scenario = _drone(_in_flight("inflight_crossing", time_limit_s=120.0), 2, companion_stop_s=10.0)
-    report = asyncio.run(run_replay(scenario)).report
+    report = asyncio.run(run_replay(scenario)).report.to_json()
     alice = report["drones"][0]
     assert not alice["runs"], alice["timeline"]  # no result ever came
     (action,) = alice["precautionary"] or [alice["timeline"]]
@@ -312,7 +312,7 @@ def test_failsafe_hold_stops_before_the_segments_within_reach() -> None:
         failsafe=Action.HOLD,
     )
     replay = asyncio.run(run_replay(scenario))
-    report = replay.report
+    report = replay.report.to_json()
     alice = report["drones"][0]
     assert alice["precautionary"][0]["action"] == "hold"
     assert any(e["kind"] == "hold" for e in alice["timeline"])

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from companion.sim.report import format_report, notes, problems
+from companion.sim.report import ReplayReport, format_report
 
 
 def _drone(ident: int, **changes: Any) -> dict[str, Any]:
@@ -16,16 +16,25 @@ def _drone(ident: int, **changes: Any) -> dict[str, Any]:
         "operator": "fleet",
         "autopilot": "px4",
         "vehicle": "mock",
+        "segments": 2,
+        "conflicting_segments": [0],
+        "flagged_segments": [0] if ident == 1 else [],
+        "edits": [],
         "edit": "not needed",
         "levels": {},
+        "runs": [],
         "precautionary": [],
         "failures": [],
+        "timeline": [],
         "runs_unfinished": 0,
         "untrusted_heard": [],
-        "auth": {"run_bytes": 200, "beacon_added_bytes": 300},
+        "beacons_rejected": {},
+        "auth": {"run_bytes": 200, "beacon_bytes": 500, "beacons": {}, "beacon_added_bytes": 300},
         "bytes_sent": 1000,
         "frames_sent": 10,
         "airtime_s": 2.0,
+        "max_altitude_m_amsl": 528.0,
+        "vehicle_holds": "edited" if ident == 1 else "original",
     }
     return drone | changes
 
@@ -41,11 +50,14 @@ GOOD: dict[str, Any] = {
         {
             "drones": [1, 2],
             "trusted": True,
+            "paths_cross": True,
             "conflict": True,
+            "acted": True,
             "resolved": True,
             "closest_approach_m": 10.1,
             "closest_approach_baseline_m": 0.3,
             "closest_approach_t_s": 184.0,
+            "resolved_tolerance_m": 0.5,
         }
     ],
     "conflicts": 1,
@@ -56,16 +68,16 @@ GOOD: dict[str, Any] = {
 }
 
 
-def _report(change: Any) -> dict[str, Any]:
-    report = copy.deepcopy(GOOD)
-    change(report)
-    report["problems"] = problems(report)
-    return report
+def _report(change: Any) -> ReplayReport:
+    doc = copy.deepcopy(GOOD)
+    change(doc)
+    return ReplayReport.from_json(doc).judged()
 
 
 def test_a_clean_replay_says_ok() -> None:
     report = _report(lambda r: None)
-    assert report["problems"] == []
+    assert report.problems == [] and report.ok
+    assert ReplayReport.from_json(report.to_json()) == report  # --out reads back the same
     text = format_report(report)
     assert text.splitlines()[-1].startswith("OK: every mission flown")
     assert "flies segments 0 (+10 m) higher (upload verified)" in text
@@ -111,8 +123,7 @@ def test_what_does_not_fail_a_replay_is_still_stated() -> None:
         }
 
     report = _report(change)
-    assert report["problems"] == []
-    report["notes"] = notes(report)
+    assert report.problems == [] and report.ok
     text = format_report(report)
     assert "drone 2: 1 run(s) still under way at the end" in text
     assert "drone 2: 1 run(s) ended without a result (run failed)" in text
@@ -133,6 +144,6 @@ def test_every_failure_is_stated_and_fails_the_replay(change: Any, says: str) ->
     """A summary never says OK for what did not happen (the planner failing with "0/0"
     conflicts once printed a clean summary and exit 0)."""
     report = _report(change)
-    assert report["problems"] and any(says in p for p in report["problems"])
+    assert not report.ok and any(says in p for p in report.problems)
     text = format_report(report)
     assert "FAILED" in text and says in text and "OK:" not in text
