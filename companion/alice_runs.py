@@ -171,6 +171,12 @@ class AliceRuns(Edits):
             self._forget(peer.node)  # its certificate is gone or taken over: not our peer
             return False
         op = neighbour.operator
+        if self.settings.suite is Suite.PAPER and not op.paper_keys:
+            # Bob's unproven keys could make what he decrypts depend on our path: only with
+            # drones whose operator vouches for them (trust.operator.paper_keys).
+            error = f"operator {op.name} is not trusted with paper-suite keys (paper_keys)"
+            self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=error)
+            return False
         try:
             ticket = self.ledger.admit(
                 peer.identity, op.key.fingerprint, op.max_runs_per_hour, self.clock.wall(), ALICE

@@ -29,6 +29,7 @@
     key = "acme.pub"                      # a PEM public key file, or 64 hex digits
     max_segments = 256                    # largest padded path of a run with its drones
     max_runs_per_hour = 24                # runs its drones together may ask of us
+    paper_keys = false                    # suite "paper": we accept its drones' unproven keys
     [limits]
     max_runs_per_peer = 8                 # runs one certified drone may ask of us per hour
     max_runs_total = 64                   # runs all drones together may ask of us per hour
@@ -126,13 +127,14 @@ def _credentials(doc: Table, base: Path, node: int) -> Credentials | None:
         text = entry.text("key")
         max_segments = entry.integer("max_segments", 256, low=1, high=MAX_SEGMENTS)
         runs = entry.integer("max_runs_per_hour", 24, low=1)
+        paper_keys = entry.flag("paper_keys", False)
         try:
             public = (
                 PublicKey.parse(text)
                 if len(text.strip()) == 64 and not Path(text).suffix
                 else read_public_key(_path(base, text))
             )
-            operators.append(Operator(name, public, max_segments, runs))
+            operators.append(Operator(name, public, max_segments, runs, paper_keys))
         except (KeyFileError, ValueError) as exc:
             raise entry.fail(f"({name}) {exc}") from None
     return Credentials(Identity(key, cert), TrustStore(operators, UnknownPeers(policy)), state)

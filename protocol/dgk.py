@@ -25,7 +25,7 @@ from .encoding import Reader, byte_width, int_to_fixed
 from .errors import LocalProtocolError, RemoteProtocolError
 from .noise import NoisePool
 from .params import check_dgk_t, check_modulus_bits
-from .primes import crt_pair, is_probable_prime, random_prime, random_unit
+from .primes import crt_pair, has_small_factor, is_probable_prime, random_prime, random_unit
 
 MAX_U_BITS = 16
 
@@ -130,7 +130,7 @@ class DGKPublicKey:
         n, g, h = (mpz(reader.uint(width)) for _ in range(3))
         u, t = reader.uint(2), reader.uint(2)
         reader.finish()
-        if byte_width(n) != width or n % 2 == 0 or gmpy2.is_prime(n):
+        if byte_width(n) != width or n % 2 == 0 or gmpy2.is_prime(n) or has_small_factor(n):
             raise RemoteProtocolError("DGK modulus is malformed")
         if not is_probable_prime(u) or u.bit_length() > MAX_U_BITS or u < 5:
             raise RemoteProtocolError("DGK u must be a small prime")

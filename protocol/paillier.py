@@ -24,7 +24,7 @@ from .encoding import Reader, byte_width, int_to_fixed
 from .errors import LocalProtocolError, RemoteProtocolError
 from .noise import NoisePool
 from .params import check_modulus_bits
-from .primes import crt_pair, random_prime, random_unit
+from .primes import crt_pair, has_small_factor, random_prime, random_unit
 
 
 class PaillierPublicKey:
@@ -72,12 +72,15 @@ class PaillierPublicKey:
 
     @classmethod
     def from_bytes(cls, data: bytes, *, insecure_for_tests: bool = False) -> PaillierPublicKey:
-        """Decode a peer's key: odd, composite, top byte non-zero, at least 2048 bits."""
+        """Decode a peer's key: odd, composite, no factor below 2^16, not a square, top byte
+        non-zero, at least 2048 bits."""
         if not data or data[0] == 0:
             raise RemoteProtocolError("Paillier modulus must have its top byte set")
         n = mpz(int.from_bytes(data, "big"))
         if n % 2 == 0 or gmpy2.is_prime(n) or gmpy2.is_square(n):
             raise RemoteProtocolError("Paillier modulus is not an odd RSA modulus")
+        if has_small_factor(n):
+            raise RemoteProtocolError("Paillier modulus has a small factor")
         try:
             return cls(n, insecure_for_tests=insecure_for_tests)
         except LocalProtocolError as exc:

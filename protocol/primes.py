@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import secrets
 
 import gmpy2
@@ -50,3 +51,23 @@ def crt_pair(rp: int, rq: int, p: int, q: int, q_inv_p: int) -> mpz:
     """The x mod p*q with x = rp (mod p), x = rq (mod q), given q^-1 mod p (Garner)."""
     h = ((mpz(rp) - rq) * q_inv_p) % p
     return mpz(rq) + h * q
+
+
+SMALL_FACTOR_BOUND = 1 << 16
+
+
+@functools.cache
+def _small_primorial() -> mpz:
+    """The product of the primes below SMALL_FACTOR_BOUND (about 94,000 bits)."""
+    product, p = mpz(1), mpz(2)
+    while p < SMALL_FACTOR_BOUND:
+        product *= p
+        p = gmpy2.next_prime(p)
+    return product
+
+
+def has_small_factor(n: int) -> bool:
+    """Whether a prime below 2^16 divides ``n``: a peer's modulus built as 3 * P (a factor
+    it knows the order of) is refused at once.  What this cannot see -- two large factors
+    of a bad form -- needs a proof of the modulus (docs/security.md)."""
+    return gmpy2.gcd(mpz(n), _small_primorial()) != 1

@@ -48,6 +48,10 @@ class Operator:
     key: PublicKey
     max_segments: int = 256  # largest padded path a run with its drones may have
     max_runs_per_hour: int = 24  # runs its drones together may ask of us per hour
+    # The paper suite's Paillier and DGK keys come without a proof that they are well formed
+    # (docs/security.md, "A deviating peer"): we run it only with drones of operators we
+    # trust to have checked their drones' keys.  The compact suite needs no such trust.
+    paper_keys: bool = False
 
     def __post_init__(self) -> None:
         if not 1 <= self.max_segments <= 256:

@@ -23,10 +23,12 @@ def make_fleet(
     *,
     untrusted: Iterable[str] = (),
     unknown: UnknownPeers = UnknownPeers.IGNORE,
+    paper_keys: bool = False,
 ) -> dict[int, Credentials]:
     """Credentials per drone id from (id, operator name) pairs.  Every drone trusts every
     operator not in ``untrusted``; a drone of an untrusted operator trusts its own operator
-    too (an intruder that tries to deconflict with a fleet that does not know it)."""
+    too (an intruder that tries to deconflict with a fleet that does not know it).
+    ``paper_keys``: every trusted operator is trusted with paper-suite keys too."""
     drones = list(drones)
     operators = {name: SigningKey.generate() for name in sorted({op for _, op in drones})}
     excluded = set(untrusted)
@@ -36,7 +38,7 @@ def make_fleet(
         key = SigningKey.generate()
         cert = Certificate.issue(operators[operator], key.public, node, start, start + VALID_S)
         trusted = [
-            Operator(name, op.public)
+            Operator(name, op.public, paper_keys=paper_keys)
             for name, op in operators.items()
             if name not in excluded or name == operator
         ]

@@ -120,21 +120,15 @@ def test_malformed_messages_are_rejected(keys: Any) -> None:
         alice.compare_bits(BitDecompositions(b"\x00" * alice.bits_size()))
     with pytest.raises(RemoteProtocolError):
         bob.decompose(MaskedDifferences(masked.ciphertexts * 2))
-    _, bob = parties(keys, [0], 8)
-    with pytest.raises(RemoteProtocolError):
-        bob.decompose(MaskedDifferences((keys.paillier_pub.encrypt(1 << 200),)))
+    # (values above the slots and tests with several zeros are not refused: a refusal would
+    # be a bit of a deviating Alice's choice; tests/protocol/deviating/)
 
 
-def test_wrong_test_count_and_double_zero_are_rejected(keys: Any) -> None:
+def test_wrong_test_count_is_rejected(keys: Any) -> None:
     alice, bob = parties(keys, [1], 8)
     tests = alice.compare_bits(bob.decompose(alice.mask()))
     with pytest.raises(RemoteProtocolError):
         bob.zero_test(BlindedTests(tests.ciphertexts[:-1]))
-    alice, bob = parties(keys, [1], 8)
-    bob.decompose(alice.mask())
-    zero = keys.dgk_pub.encrypt(0)
-    with pytest.raises(RemoteProtocolError):
-        bob.zero_test(BlindedTests((zero,) * 9))
 
 
 def test_parameter_floor(keys: Any) -> None:

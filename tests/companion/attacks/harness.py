@@ -170,6 +170,7 @@ async def world(
     loss: float = 0.0,
     extra: dict[int, str] | None = None,
     profile: str = "us915-sf7",
+    paper_keys: bool = False,
 ) -> World:
     """Drones on the ground at their homes, their companions started (no MAVSDK: a fake
     autopilot), beaconing, listening and comparing on one simulated US915 SF7 channel.
@@ -184,6 +185,7 @@ async def world(
         state,
         untrusted=untrusted,
         unknown=unknown,
+        paper_keys=paper_keys,
     )
     drones, autopilots, taps = {}, {}, {}
     for node, plan in missions.items():

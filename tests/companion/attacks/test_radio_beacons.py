@@ -142,7 +142,9 @@ def test_paper_suite_keys_must_match_the_beacons(tmp_path: Path) -> None:
     from protocol.wire import Suite
 
     async def main(forge_keys: bool) -> World:
-        w = await world(tmp_path / str(forge_keys), settings={"suite": Suite.PAPER})
+        w = await world(
+            tmp_path / str(forge_keys), settings={"suite": Suite.PAPER}, paper_keys=True
+        )
         if forge_keys:
             w.drones[2].keys_hash = bytes(16)  # what its beacons will say from now on
         await w.clock.sleep(3600)
