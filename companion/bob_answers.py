@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 
 from protocol.errors import ProtocolError
+from protocol.grid import GridKind
 from protocol.intersection import Bob, State
 from protocol.wire import Hello
 
@@ -24,12 +25,15 @@ from .exchange import serve_bob
 from .link.arq import LinkError
 from .link.frames import AbortCode
 from .mission import point_as_segment
+from .peers import Peer, distance_m
 from .progress import RunProgress
 from .radio import ANSWER_FULL, ANSWER_NEAR
 from .roles import Role
 
 log = logging.getLogger("companion")
 SETUPS_PER_PEER = 2
+BOX_SLACK_M = 200.0  # Alice's box centre may be off her last beacon by this much, plus
+MAX_SPEED_M_S = 40.0  # what she can have flown since at this speed (peers.Peer's cap)
 
 
 class BobAnswers(CompanionCore):
@@ -162,6 +166,9 @@ class BobAnswers(CompanionCore):
         if hello.m > allowed:  # more than its beacon announced or its operator allows
             await self._refuse(peer, session, responder, Refusal.SIZE)
             return None
+        if not self._plausible_box(hello, known):
+            await self._refuse(peer, session, responder, Refusal.BOX)
+            return None
         try:
             ticket = self.ledger.admit(
                 known.identity, operator.key.fingerprint, operator.max_runs_per_hour, wall, BOB
@@ -173,6 +180,18 @@ class BobAnswers(CompanionCore):
         known.role = Role.BOB
         known.conflicts.clear()  # as Bob we do not adjust for this peer
         return responder, hello, ticket
+
+    def _plausible_box(self, hello: Hello, known: Peer) -> bool:
+        """Alice's grid is centred where she is (her position when the run starts): within
+        what she can have flown since her last verified beacon.  Bob's path is cut to her
+        box, so a box elsewhere would let a deviating Alice probe where Bob flies far from
+        her.  The refusal depends on her request and her beacons only, not on Bob's path."""
+        grid = hello.grid
+        if grid.kind is not GridKind.GEO:
+            return False  # a drone's run is on the globe
+        age = max(self.clock.now() - known.heard_at, 0.0)
+        reach = BOX_SLACK_M + MAX_SPEED_M_S * age
+        return distance_m((grid.ref_lat_e7, grid.ref_lon_e7), known.position) <= reach
 
     async def _refuse(self, peer: int, session: int, responder: Responder, code: Refusal) -> None:
         self.record(EventKind.REFUSED, peer=peer, reason=code.name)

@@ -72,6 +72,7 @@ class Refusal(enum.IntEnum):
     SIZE = 4  # your path is larger than your beacon or your operator's limit allows
     BUSY = 5  # not now
     UNKNOWN_PEER = 6  # I hold no certificate of yours yet: beacon it, then ask again
+    BOX = 7  # your grid is not centred where your beacons say you are
 
 
 @dataclass(frozen=True, slots=True)

@@ -46,7 +46,9 @@ def test_abort_probe_learns_nothing_from_where_bobs_path_lies(tmp_path: Path) ->
     """A certified drone probes drone 2 (a straight 560 m leg north) with boxes it picks, all
     of one size: holding all of drone 2's path, cutting it, touching nothing of it, far away.
     No refusal, no abort, no text: the replies have the same sizes every time (the public
-    size n is drone 2's own) and the answers are right where they can be."""
+    size n is drone 2's own) and the answers are right where they can be.  (Each box is
+    centred where the prober's signed beacon just put it, as Bob requires: a box away from
+    its beacons is refused whatever Bob's path, tests/companion/attacks/test_deviating_peer.py.)"""
     placements = [
         ((473_987_000, 85_450_000), 600.0),  # the whole leg inside
         ((473_990_000, 85_450_000), 100.0),  # the leg crosses the box
@@ -57,9 +59,9 @@ def test_abort_probe_learns_nothing_from_where_bobs_path_lies(tmp_path: Path) ->
     async def main() -> tuple[World, list[Any]]:
         w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
         rogue = await w.rogue(9)
-        await rogue.announce(w, placements[0][0])
         runs = []
         for centre, radius in placements:
+            await rogue.announce(w, centre)
             grid = GridSpec.geo(*centre, radius_m=radius)
             r = grid.range // 2  # an east-west line through the box's middle
             runs.append(await rogue.compare(w, 2, ((-r, 0), (r, 0)), grid))
