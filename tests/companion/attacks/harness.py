@@ -263,3 +263,19 @@ def aborts_are_codes(w: World) -> None:
     """Nothing but a one-byte code in any abort on the air (no text, no position)."""
     for frame in w.sniffer.of(FrameType.ABORT):
         assert len(frame.payload) == 1 and frame.payload[0] in set(AbortCode)
+
+
+def count_bobs(monkeypatch: Any) -> list[Any]:
+    """Every Bob machine a companion builds from now on (a request refused before any work
+    builds none)."""
+    import companion.bob_answers
+
+    built: list[Any] = []
+    real_bob = companion.bob_answers.Bob
+
+    def counting_bob(*args: Any, **kwargs: Any) -> Any:
+        built.append(args)
+        return real_bob(*args, **kwargs)
+
+    monkeypatch.setattr(companion.bob_answers, "Bob", counting_bob)
+    return built

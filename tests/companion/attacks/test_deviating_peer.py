@@ -14,7 +14,7 @@ from companion.link import run_simulated
 from protocol.grid import GridSpec
 from protocol.wire import Suite
 
-from .harness import World, world
+from .harness import World, count_bobs, world
 
 pytestmark = [pytest.mark.attack, pytest.mark.deviating]
 
@@ -50,16 +50,7 @@ def test_a_box_away_from_alices_beacons_is_refused_before_any_work(
     grid on somebody's delivery address, kilometres from where her signed beacons put her,
     would probe where Bob flies there.  Bob refuses such a request (signed, BOX) before he
     builds anything; the same request centred where she is gets its answer."""
-    import companion.bob_answers
-
-    built: list[Any] = []
-    real_bob = companion.bob_answers.Bob
-
-    def counting_bob(*args: Any, **kwargs: Any) -> Any:
-        built.append(args)
-        return real_bob(*args, **kwargs)
-
-    monkeypatch.setattr(companion.bob_answers, "Bob", counting_bob)
+    built = count_bobs(monkeypatch)
     here = (474_011_000, 85_455_940)
     away = (474_461_000, 85_455_940)  # 5 km north
 

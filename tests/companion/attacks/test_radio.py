@@ -16,7 +16,7 @@ from companion.link.frames import AbortCode, Frame, FrameType
 from protocol.compact_plan import message_sizes
 from protocol.grid import GridSpec
 
-from .harness import Tap, World, aborts_are_codes, world
+from .harness import Tap, World, aborts_are_codes, count_bobs, world
 
 pytestmark = pytest.mark.attack
 
@@ -216,16 +216,7 @@ def test_a_spliced_session_fails(tmp_path: Path) -> None:
 def test_an_oversized_request_is_refused_before_any_work(tmp_path: Path, monkeypatch: Any) -> None:
     """A certified drone whose beacon says its path has at most 2 segments asks for a run of
     64, then of 256: refused (signed, SIZE) before drone 2 builds anything for it."""
-    import companion.bob_answers
-
-    built: list[Any] = []
-    real_bob = companion.bob_answers.Bob
-
-    def counting_bob(*args: Any, **kwargs: Any) -> Any:
-        built.append(args)
-        return real_bob(*args, **kwargs)
-
-    monkeypatch.setattr(companion.bob_answers, "Bob", counting_bob)
+    built = count_bobs(monkeypatch)
 
     async def main() -> tuple[World, list[Any]]:
         w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
