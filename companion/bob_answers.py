@@ -25,7 +25,7 @@ from .exchange import serve_bob
 from .link.arq import LinkError
 from .link.frames import AbortCode
 from .mission import point_as_segment
-from .peers import Peer, distance_m
+from .peers import MAX_SPEED_M_S, Peer, distance_m
 from .progress import RunProgress
 from .radio import ANSWER_FULL, ANSWER_NEAR
 from .roles import Role
@@ -33,7 +33,7 @@ from .roles import Role
 log = logging.getLogger("companion")
 SETUPS_PER_PEER = 2
 BOX_SLACK_M = 200.0  # Alice's box centre may be off her last beacon by this much, plus
-MAX_SPEED_M_S = 40.0  # what she can have flown since at this speed (peers.Peer's cap)
+# what she can have flown since at peers.MAX_SPEED_M_S
 
 
 class BobAnswers(CompanionCore):

@@ -79,24 +79,24 @@ class _Party:
         session: int,
         machine: Alice | Bob,
         report: RunReport,
-        charge_cpu: bool,
     ) -> None:
         self.endpoint, self.peer, self.session = endpoint, peer, session
         self.machine, self.report = machine, report
-        self.charge_cpu = charge_cpu or endpoint.clock.charges_cpu
 
     async def compute(self, step: Callable[[], T]) -> T:
-        """Run one machine step.  On a virtual clock it runs inline and its CPU time passes as
-        link time; in real time it runs in a worker thread, so the radio (and the autopilot's
-        MAVSDK) keep being served while it computes."""
+        """Run one machine step.  On a clock that charges CPU (simulations) it runs inline
+        and its CPU time then passes as link time; on a virtual loop it runs inline too;
+        otherwise in a worker thread, so the radio (and the autopilot's MAVSDK) keep being
+        served while it computes."""
         loop = asyncio.get_running_loop()
-        if self.charge_cpu or isinstance(loop, VirtualTimeLoop):
+        charge = self.endpoint.clock.charges_cpu
+        if charge or isinstance(loop, VirtualTimeLoop):
             # Virtual time must not run ahead of a worker thread: compute inline.
             start = time.thread_time()  # this thread's CPU: not MAVSDK's threads beside it
             result = step()
             spent = time.thread_time() - start
             self.report.cpu_s += spent
-            if self.charge_cpu:
+            if charge:
                 await self.endpoint.clock.sleep(spent)
             return result
 
@@ -160,7 +160,6 @@ async def run_alice(
     secure: Callable[[int], Initiator] | None = None,
     check_keys: Callable[[bytes, bytes], bool] | None = None,
     timeout: float | None = None,
-    charge_cpu: bool = False,
 ) -> RunReport:
     """Open a session to ``peer`` (Bob) and run Alice to her result.
 
@@ -169,7 +168,7 @@ async def run_alice(
     (his per-start nonce and, paper suite, his public keys) is what his beacons announced."""
     session = endpoint.open(peer)
     report = RunReport(Role.ALICE, peer, session, endpoint.clock.now())
-    party = _Party(endpoint, peer, session, alice, report, charge_cpu)
+    party = _Party(endpoint, peer, session, alice, report)
     channel = secure(session) if secure is not None else None
 
     async def run() -> None:
@@ -211,7 +210,6 @@ async def serve_bob(
     secure: Responder | None = None,
     boot: bytes = b"",
     timeout: float | None = None,
-    charge_cpu: bool = False,
     first: bytes | None = None,
 ) -> RunReport:
     """Answer the session ``peer`` opened.  Its first message waits in the inbox, or was
@@ -219,7 +217,7 @@ async def serve_bob(
     request the :class:`Responder` verified.  A hello naming an OT setup Bob does not hold
     is answered with a signed refusal (the peer starts a fresh setup)."""
     report = RunReport(Role.BOB, peer, session, endpoint.clock.now())
-    party = _Party(endpoint, peer, session, bob, report, charge_cpu)
+    party = _Party(endpoint, peer, session, bob, report)
     pending = [first] if first is not None else []
 
     async def run() -> None:

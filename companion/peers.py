@@ -19,6 +19,8 @@ from protocol.intersection import MAX_SEGMENTS, Limits
 from .beacon import Beacon
 from .roles import Role
 
+MAX_SPEED_M_S = 40.0  # no drone flies faster: beacon speeds are capped, boxes bounded by it
+
 
 def distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
     """Ground distance between two degE7 points."""
@@ -99,7 +101,7 @@ class Peer:
         return self.beacon.lat, self.beacon.lon
 
     def heard(
-        self, beacon: Beacon, now: float, own: tuple[int, int], *, max_speed: float = 40.0
+        self, beacon: Beacon, now: float, own: tuple[int, int], *, max_speed: float = MAX_SPEED_M_S
     ) -> None:
         """A new beacon: update the speed estimate (smoothed, capped: beacon positions are
         coarse and a take-off jump is not a speed), the rate at which the distance to us

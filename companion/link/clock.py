@@ -21,16 +21,17 @@ T = TypeVar("T")
 
 
 class Clock:
-    """Seconds of link time; ``scale`` link seconds pass per second of the event loop."""
+    """Seconds of link time; ``scale`` link seconds pass per second of the event loop.
 
-    # A simulation's clock may want each protocol step's CPU charged as link time (computed
-    # inline, the party then waits its thread CPU): see companion.sim.paced_clock.
-    charges_cpu = False
+    ``charges_cpu``: a simulation's clock on which each protocol step is computed inline and
+    its thread CPU then passes as link time (the run's own computer, modelled; see
+    :mod:`companion.exchange`) -- not a drone's, whose steps run in a worker thread."""
 
-    def __init__(self, scale: float = 1.0) -> None:
+    def __init__(self, scale: float = 1.0, *, charges_cpu: bool = False) -> None:
         if scale <= 0:
             raise ValueError("time scale must be positive")
         self.scale = scale
+        self.charges_cpu = charges_cpu
         self._wall_offset: float | None = None
 
     def now(self) -> float:

@@ -22,10 +22,11 @@ from xml.etree import ElementTree as ET
 
 from protocol.tools import cli
 
+from .vehicles import Track
+
 if TYPE_CHECKING:
     from .replay import Replay
 
-Track = Sequence[tuple[float, float, float, float]]  # (t_s, lat, lon, alt AMSL)
 KML_NS = "http://www.opengis.net/kml/2.2"
 COLOURS = ("ff1f77b4", "ff0e7fff", "ff2ca02c", "ff2827d6", "ffbd6794", "ff4b568c")  # aabbggrr
 

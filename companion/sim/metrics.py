@@ -20,10 +20,9 @@ from ..mission import MissionItem, point_as_segment
 from ..runtime import Companion
 from .report import AuthCost, DroneReport, EditStatus, LinkInfo, PairReport, ReplayReport
 from .scenario import Scenario
-from .vehicles import ReplayVehicle
+from .vehicles import ReplayVehicle, Track
 
 REPORT_RADIUS_M = 50_000.0  # the report's own grid (plain predicate only): any encounter fits
-Track = list[tuple[float, float, float, float]]  # (t_s, lat, lon, alt AMSL)
 
 
 def enu(a: tuple[float, float, float], ref: tuple[float, float]) -> tuple[float, float, float]:

@@ -59,7 +59,7 @@ async def _run(
     config: LinkConfig | None,
     authenticated: bool,
 ) -> dict[str, Any]:
-    clock = Clock()
+    clock = Clock(charges_cpu=True)  # both parties' CPU passes as link time
     channel = Channel(impairments, seed)
     medium = SimMedium(channel, clock)
     a = LinkEndpoint(ALICE_NODE, medium.attach(ALICE_NODE), link, config, clock)
@@ -71,12 +71,12 @@ async def _run(
         async def bob_side() -> RunReport:
             peer, session = await b.accept()
             if fleet is None:
-                return await serve_bob(b, peer, session, bob, charge_cpu=True)
+                return await serve_bob(b, peer, session, bob)
             init = Init.parse(await b.receive(peer, session))
             responder = Responder(fleet[1], init, Route(peer, BOB_NODE, session))
             responder.verify(fleet[0].cert, b.arrived(peer, session), 30.0, link.budget_wait_s)
             return await serve_bob(
-                b, peer, session, bob, secure=responder, boot=bytes(16), charge_cpu=True,
+                b, peer, session, bob, secure=responder, boot=bytes(16),
                 first=init.hello,
             )  # fmt: skip
 
@@ -87,9 +87,7 @@ async def _run(
 
         bob_task = asyncio.create_task(bob_side())
         try:
-            report = await run_alice(
-                a, BOB_NODE, alice, secure=secure if fleet else None, charge_cpu=True
-            )
+            report = await run_alice(a, BOB_NODE, alice, secure=secure if fleet else None)
         except BaseException:
             bob_task.cancel()
             raise

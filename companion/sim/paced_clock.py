@@ -9,7 +9,7 @@ in which nobody could act: runs overrun, the fail-safe climbs, outcomes depend o
 :class:`PacedClock` counts only the time the loop is scheduled: a ticker wakes every
 ``TICK_S``, and whatever a gap between two ticks has beyond ``MAX_GAP_S`` does not pass.  A
 protocol step computed inline blocks the loop, so it passes as no time either; the party
-charges its measured thread CPU instead (``charge_cpu``), the same on an idle or a busy
+charges its measured thread CPU instead (``charges_cpu``), the same on an idle or a busy
 machine.  Everything in the loop -- the vehicles' flight, the radio, the companions' timers --
 reads this one clock, so they stay consistent with each other when the machine stalls.
 What it cannot pace runs outside the loop: MAVSDK's server processes.
@@ -38,10 +38,8 @@ class PacedClock(Clock):
     their deadline: a real timer that comes due early, because time was held back, waits on.
     """
 
-    charges_cpu = True
-
     def __init__(self, scale: float = 1.0) -> None:
-        super().__init__(scale)
+        super().__init__(scale, charges_cpu=True)
         self._lost = 0.0  # real seconds that did not pass
         self._last: float | None = None  # the ticker's last wake-up (loop time)
 

@@ -6,9 +6,10 @@ import itertools
 import math
 from pathlib import Path
 
-from .metrics import Track, closest, enu
+from .metrics import closest, enu
 from .replay import Replay
 from .scenario import ScenarioError
+from .vehicles import Track
 
 MARKERS = {
     "run_started": ("^", "run started"),

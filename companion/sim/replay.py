@@ -31,13 +31,13 @@ from ..link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
 from ..planner import OffsetSettings
 from ..runtime import Companion, CompanionSettings
 from .fleet import make_fleet
-from .metrics import Track, build_report
+from .metrics import build_report
 from .mock_autopilot import FlightModel, MockAutopilot
 from .paced_clock import PacedClock
 from .px4 import Px4Build
 from .report import ReplayReport
 from .scenario import Scenario, ScenarioError
-from .vehicles import MockVehicle, Px4SitlVehicle, ReplayVehicle
+from .vehicles import MockVehicle, Px4SitlVehicle, ReplayVehicle, Track
 
 log = logging.getLogger(__name__)
 # SIH lock-step speed factor for two PX4 vehicles, their companions and the protocol on 2
@@ -144,7 +144,6 @@ async def run_replay(
     # time); PX4 SITL keeps lock-step real time, so with it the plain scaled clock.
     paced = PacedClock(ts) if px4 is None else None
     clock = paced or Clock(ts)
-    ticker = asyncio.create_task(paced.tick()) if paced is not None else None
     medium = SimMedium(Channel(Impairments(loss=scenario.loss), scenario.seed), clock)
     link = profile(scenario.link_profile)
     mocks: dict[int, ReplayVehicle] = {}
@@ -165,6 +164,7 @@ async def run_replay(
         if progress:
             print(f"  ... {message}", file=sys.stderr, flush=True)
 
+    ticker = asyncio.create_task(paced.tick()) if paced is not None else None
     try:
         for d in scenario.drones:
             vehicle: ReplayVehicle

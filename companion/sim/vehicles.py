@@ -16,7 +16,7 @@ from ..mission import MissionItem
 from .mock_autopilot import Faults, FlightModel, MockAutopilot
 from .px4 import Px4Build, Px4Error, Px4Vehicle
 
-Track = list[tuple[float, float, float, float]]
+Track = list[tuple[float, float, float, float]]  # (simulated s, lat, lon, alt AMSL)
 RESOLVED_TOLERANCE_M = 0.5  # two mocks: a pair is resolved at the offset minus this
 SAMPLE_S = 0.05
 HELD_TRIES = 3  # real seconds between track samples of a PX4 vehicle
