@@ -95,9 +95,12 @@ class Tap:
         return bool(self.inner.channel_busy())
 
     async def transmit(self, frame: bytes, airtime: float) -> None:
-        with contextlib.suppress(ValueError):
-            self.sniffer.frames.append((self.clock.now(), decode_frame(frame)))
+        """The sniffer has a frame once its transmission ended: one cut off by its sender's
+        stop is heard by nobody, the attacker included (recorded at its start time)."""
+        start = self.clock.now()
         await self.inner.transmit(frame, airtime)
+        with contextlib.suppress(ValueError):
+            self.sniffer.frames.append((start, decode_frame(frame)))
 
     async def close(self) -> None:
         await self.inner.close()

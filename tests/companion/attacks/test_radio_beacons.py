@@ -35,12 +35,13 @@ def test_replayed_beacons_are_dropped(tmp_path: Path) -> None:
     async def main() -> tuple[World, int, int]:
         w = await world(tmp_path)
         await w.clock.sleep(120)
+        await w.drones[2].stop()  # silent now: whatever drone 1 hears of "2" is the attacker
+        await w.clock.sleep(2)  # a frame still on its way when drone 2 stopped has landed
         recorded = [
             f for _, f in w.sniffer.frames
             if f.type is FrameType.BEACON and f.src == 2
             and not isinstance(decode_beacon(f.payload), CertBeacon)
         ]  # fmt: skip
-        await w.drones[2].stop()  # silent now: whatever drone 1 hears of "2" is the attacker
         peer = w.drones[1].peers[2]
         heard, before = peer.heard_at, sum(w.drones[1].rejected.values())
         for frame in recorded:
