@@ -16,7 +16,7 @@ import logging
 import math
 
 from protocol.compact_plan import message_sizes
-from protocol.errors import ProtocolError
+from protocol.errors import ConsistencyError, ProtocolError
 from protocol.grid import GridSpec
 from protocol.intersection import MAX_SEGMENTS, Alice, Limits
 from protocol.wire import Suite
@@ -275,6 +275,12 @@ class AliceRuns(Edits):
                 return False
             except AuthenticationError as exc:
                 self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, auth=str(exc))
+                return False
+            except ConsistencyError as exc:
+                # The peer's OT extension is not the honest one: it probed our Delta.  Drop
+                # the setup (a wrong guess must not be followed by another on the same Delta).
+                self.holder_setups.pop(peer.node, None)
+                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, deviated=str(exc))
                 return False
             except (ProtocolError, LinkError, ValueError) as exc:
                 self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=str(exc))

@@ -35,3 +35,9 @@ class InputRangeError(LocalProtocolError):
 class UnknownSetupError(RemoteProtocolError):
     """The peer's hello names an OT setup this party does not hold (it restarted, or dropped
     it): the peer should start a fresh one."""
+
+
+class ConsistencyError(RemoteProtocolError):
+    """The peer's OT extension fails the consistency check (:mod:`protocol.ot.check`): it
+    deviated from the protocol, or the OT setup is corrupt.  The run ends and the setup must be
+    dropped: its Delta may have been probed."""

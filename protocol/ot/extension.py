@@ -31,6 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import LocalProtocolError, RemoteProtocolError
+from . import check
 from .hashing import KEY_SIZE, prg, rot_key
 from .setup import ChooserSetup, HolderSetup
 
@@ -39,8 +40,11 @@ MAX_OTS = 1 << 24
 
 
 def correction_size(blocks: Sequence[int], count: int) -> int:
-    """Bytes of Bob's extension message for ``count`` OTs."""
-    return (len(blocks) - 1) * ((count + 7) // 8)
+    """Bytes of Bob's extension message for ``count`` OTs: the corrections of ``count`` and of
+    the check's extra OTs, and the check's reply (:mod:`.check`)."""
+    kappa = sum(blocks)
+    total = count + check.extra_ots(kappa)
+    return (len(blocks) - 1) * ((total + 7) // 8) + check.reply_size(kappa)
 
 
 def _expand(leaves: Sequence[bytes | None], nonce: bytes, nbytes: int) -> Bytes:
@@ -80,7 +84,7 @@ def _tweak(nonce: bytes, index: int) -> bytes:
 
 
 def _check(count: int, nonce: bytes) -> None:
-    if not 1 <= count <= MAX_OTS:
+    if not 1 <= count <= MAX_OTS - check.extra_ots(128):
         raise LocalProtocolError(f"{count} OTs outside 1..{MAX_OTS}")
     if len(nonce) < 16:
         raise LocalProtocolError("a run nonce has at least 16 bytes")
@@ -103,32 +107,41 @@ class HolderRots:
 
 
 def chooser_extend(setup: ChooserSetup, nonce: bytes, count: int) -> tuple[bytes, ChooserRots]:
-    """Bob: ``count`` random OTs and the message d_1 .. d_(B-1) that lets Alice follow."""
+    """Bob: ``count`` random OTs and the message d_1 .. d_(B-1) that lets Alice follow, then
+    the consistency check's reply (for ``count`` OTs and the check's extra ones)."""
     _check(count, nonce)
-    nbytes = (count + 7) // 8
+    kappa = sum(setup.blocks)
+    total = count + check.extra_ots(kappa)
+    nbytes = (total + 7) // 8
     columns: list[Bytes] = []
     sums: list[Bytes] = []
     for k, leaves in zip(setup.blocks, setup.leaves, strict=True):
         u, v = _fold(_expand(leaves, nonce, nbytes), k)
-        sums.append(_mask_tail(u, count))
+        sums.append(_mask_tail(u, total))
         columns += v
     choice = sums[0]
     message = b"".join((u ^ choice).tobytes() for u in sums[1:])
+    reply = check.respond(columns, choice, nonce, message, total)
     rows = _rows(columns, count)
     keys = tuple(rot_key(_tweak(nonce, i), rows[i].tobytes()) for i in range(count))
     bits = np.unpackbits(choice, bitorder="little")[:count]
-    return message, ChooserRots(tuple(int(b) for b in bits), keys)
+    return message + reply, ChooserRots(tuple(int(b) for b in bits), keys)
 
 
 def holder_extend(setup: HolderSetup, nonce: bytes, count: int, message: bytes) -> HolderRots:
-    """Alice: both keys of each of the ``count`` random OTs, from Bob's message."""
+    """Alice: both keys of each of the ``count`` random OTs, from Bob's message -- once it
+    passes the consistency check (:class:`~protocol.errors.ConsistencyError` if not)."""
     _check(count, nonce)
-    nbytes = (count + 7) // 8
+    kappa = sum(setup.blocks)
+    total = count + check.extra_ots(kappa)
+    nbytes = (total + 7) // 8
     if len(message) != correction_size(setup.blocks, count):
         raise RemoteProtocolError("OT extension message has the wrong size")
-    corrections = np.frombuffer(message, dtype=np.uint8).reshape(len(setup.blocks) - 1, nbytes)
+    split = (len(setup.blocks) - 1) * nbytes
+    body, reply = message[:split], message[split:]
+    corrections = np.frombuffer(body, dtype=np.uint8).reshape(len(setup.blocks) - 1, nbytes)
     for row in corrections:
-        if not np.array_equal(row, _mask_tail(row, count)):
+        if not np.array_equal(row, _mask_tail(row, total)):
             raise RemoteProtocolError("padding bits of the OT extension message must be zero")
     columns: list[Bytes] = []
     delta_bits: list[int] = []
@@ -140,6 +153,8 @@ def holder_extend(setup: HolderSetup, nonce: bytes, count: int, message: bytes) 
             bit = (d >> j) & 1
             delta_bits.append(bit)
             columns.append(w[j] ^ corrections[b - 1] if b and bit else w[j])
+    delta_int = sum(bit << j for j, bit in enumerate(delta_bits))
+    check.verify(columns, delta_int, nonce, body, total, reply)
     q = _rows(columns, count)
     delta = np.packbits(np.array(delta_bits, dtype=np.uint8), bitorder="little")
     flipped = q ^ delta

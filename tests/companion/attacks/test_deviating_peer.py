@@ -73,3 +73,48 @@ def test_a_box_away_from_alices_beacons_is_refused_before_any_work(
     assert not isinstance(near, Exception)  # the honest-looking request is answered
     assert len(built) == 1  # Bob built his machine for the second request only
     assert [e["reason"] for e in w.events(2, "refused")] == ["BOX"]
+
+
+def test_a_bob_whose_ot_extension_fails_the_check_loses_the_setup(
+    tmp_path: Path, monkeypatch: Any
+) -> None:
+    """D4: drone 2 (Bob) flips a bit of its OT extension in three runs -- a selective-failure
+    probe of drone 1's Delta.  Drone 1's consistency check refuses each such run before any
+    key is made, reports no result and keeps no setup, so no guess is ever tried twice on
+    one Delta; once drone 2 behaves, a fresh setup gives the answer."""
+    import protocol.suite_compact as compact
+
+    honest = compact.chooser_extend
+    probes = {"left": 3}
+
+    def deviating(setup: Any, nonce: bytes, count: int) -> Any:
+        message, rots = honest(setup, nonce, count)
+        if probes["left"] <= 0:
+            return message, rots
+        probes["left"] -= 1
+        flipped = bytearray(message)
+        flipped[0] ^= 1  # OT 0 of block 1: Alice's row gets Delta_1 only if her guess holds
+        return bytes(flipped), rots
+
+    monkeypatch.setattr(compact, "chooser_extend", deviating)
+    setup_ids: list[bytes] = []
+    real_finish = compact.HolderSetupStart.finish
+
+    def finish(self: Any, reply: bytes) -> Any:
+        setup = real_finish(self, reply)
+        setup_ids.append(setup.setup_id)
+        return setup
+
+    monkeypatch.setattr(compact.HolderSetupStart, "finish", finish)
+
+    async def main() -> World:
+        w = await world(tmp_path)
+        await w.clock.sleep(1800)
+        await w.stop()
+        return w
+
+    w = run_simulated(main())
+    deviated = [e for e in w.events(1, "run_failed") if "deviated" in e]
+    assert len(deviated) == 3
+    assert w.events(1, "result") and w.autopilots[1].uploads  # then the honest run's answer
+    assert len(setup_ids) == len(set(setup_ids)) == 4  # a fresh setup after each failed check
