@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import difflib
 import sys
 
 from protocol.tools import cli
@@ -35,6 +36,29 @@ def _profiles(text: str) -> tuple[str, ...]:
     return tuple(_profile(p.strip()) for p in text.split(","))
 
 
+def _autopilot_url(text: str) -> str:
+    """A MAVSDK connection URL (:func:`companion.autopilot.check_url`)."""
+    from .autopilot import check_url
+
+    try:
+        return check_url(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _mavlink_message(text: str) -> str:
+    """The name of a MAVLink message of the common dialect (what the mock may ignore)."""
+    from pymavlink.dialects.v20 import common as mavlink
+
+    names = {m.msgname for m in mavlink.mavlink_map.values()}
+    name = text.strip().upper()
+    if name not in names:
+        close = difflib.get_close_matches(name, names, 1)
+        hint = f"did you mean {close[0]}?" if close else "e.g. MISSION_COUNT"
+        raise argparse.ArgumentTypeError(f"{text!r} is not a MAVLink message ({hint})")
+    return name
+
+
 def _log_flags(parser: argparse.ArgumentParser, level_help: str) -> None:
     """--log-level and --log-json (:mod:`companion.logs`)."""
     parser.add_argument(
@@ -50,7 +74,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     probability = cli.probability
     hub = sub.add_parser("link-hub", help="a simulated radio channel shared over UDP")
-    hub.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    hub.add_argument("--host", type=cli.host, default="127.0.0.1", help="address to listen on")
     hub.add_argument(
         "--port", type=cli.listen_port, default=14600, help="UDP port to listen on (0: any)"
     )
@@ -59,7 +83,7 @@ def _parser() -> argparse.ArgumentParser:
     hub.add_argument("--duplicate", type=probability, default=0.0, help="duplication rate")
     hub.add_argument("--reorder", type=probability, default=0.0, help="reordering probability")
     hub.add_argument("--latency", type=cli.number(0, 60), default=0.002, help="seconds")
-    hub.add_argument("--seed", type=cli.seed, default=None, help="channel seed (random if unset)")
+    hub.add_argument("--seed", type=cli.seed, default=None, help="channel seed (default: random)")
     hub.add_argument(
         "--time-scale", type=cli.number(0, 10_000, above=True), default=1.0, help="speed-up"
     )
@@ -89,17 +113,33 @@ def _parser() -> argparse.ArgumentParser:
         "--time-scale", type=cli.number(0, 10_000, above=True), default=1.0, help="speed-up"
     )
     mock.add_argument(
-        "--drop-every", type=cli.integer(0), default=0, help="drop every k-th mission reply"
+        "--drop-every",
+        type=cli.integer(1),
+        default=None,
+        metavar="K",
+        help="drop every K-th mission-protocol reply (default: none dropped)",
     )
     mock.add_argument(
         "--latency", type=cli.number(0, 60), default=0.0, help="seconds added to replies"
     )
-    mock.add_argument("--ignore", action="append", help="MAVLink message name to ignore")
     mock.add_argument(
-        "--reject-upload", type=cli.integer(1, 255), default=None, help="MAV_MISSION_RESULT"
+        "--ignore",
+        action="append",
+        type=_mavlink_message,
+        metavar="MESSAGE",
+        help="a MAVLink message to ignore, e.g. MISSION_COUNT; repeatable (default: none)",
     )
     mock.add_argument(
-        "--vanish-after", type=cli.number(0, above=True), default=None, help="seconds"
+        "--reject-upload",
+        type=cli.integer(1, 255),
+        default=None,
+        help="answer every upload with this MAV_MISSION_RESULT (default: accept)",
+    )
+    mock.add_argument(
+        "--vanish-after",
+        type=cli.number(0, above=True),
+        default=None,
+        help="stop answering after this many seconds (default: never)",
     )
     mock.add_argument(
         "--trajectory",
@@ -134,7 +174,8 @@ def _parser() -> argparse.ArgumentParser:
         "--suite",
         choices=["compact", "paper"],
         default="compact",
-        help="compact (OT + EC-ElGamal) or paper (Paillier + DGK)",
+        help="compact (OT extension: SoftSpokenOT, OT products, millionaires, GMW) or paper "
+        "(Paillier + DGK)",
     )
     compare.add_argument(
         "--range",
@@ -145,7 +186,7 @@ def _parser() -> argparse.ArgumentParser:
     compare.add_argument("--loss", type=probability, default=0.0, help="frame loss probability")
     compare.add_argument("--corrupt", type=probability, default=0.0, help="corruption probability")
     compare.add_argument(
-        "--seed", type=cli.seed, default=None, help="channel seed (random if unset)"
+        "--seed", type=cli.seed, default=None, help="channel seed (default: random)"
     )
     compare.add_argument(
         "--mtu",
@@ -212,15 +253,47 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--config", type=cli.existing_file, help="TOML settings, [identity] and [trust] included"
     )
-    run.add_argument("--node", type=cli.integer(1, 0xFFFE), help="node id on the radio")
-    run.add_argument("--autopilot", help="MAVSDK URL, e.g. udpin://0.0.0.0:14540")
-    run.add_argument("--transport", choices=["udp", "serial"], help="link transport")
-    run.add_argument("--profile", type=_profile, help=f"link profile: {', '.join(PROFILES)}")
-    run.add_argument("--hub", help="link hub HOST:PORT (udp transport)")
-    run.add_argument("--serial", help="serial device of the LoRa modem")
-    run.add_argument("--offset", type=cli.number(0, 500, above=True), help="altitude offset, m")
+    # Defaults come from the config file, else from companion/config.py (the help names
+    # both; tests/test_cli_errors.py checks they agree).
+    given = "default: the config's %s, else %s"
     run.add_argument(
-        "--max-altitude", type=cli.number(0, 10_000, above=True), help="metres above home"
+        "--node",
+        type=cli.integer(1, 0xFFFE),
+        help="node id on the radio (default: the config's node; one is required)",
+    )
+    run.add_argument(
+        "--autopilot",
+        type=_autopilot_url,
+        help="MAVSDK URL: udpin://IP:PORT, udpout://HOST:PORT, tcpin/tcpout://..., "
+        f"serial:///dev/DEVICE:BAUD ({given % ('autopilot', 'udpin://0.0.0.0:14540')})",
+    )
+    run.add_argument(
+        "--transport",
+        choices=["udp", "serial"],
+        help=f"link transport ({given % ('link.transport', 'udp')})",
+    )
+    run.add_argument(
+        "--profile",
+        type=_profile,
+        help=f"link profile: {', '.join(PROFILES)} ({given % ('link.profile', 'us915-sf7')})",
+    )
+    run.add_argument(
+        "--hub",
+        help=f"link hub HOST:PORT, udp transport ({given % ('link.hub', '127.0.0.1:14600')})",
+    )
+    run.add_argument(
+        "--serial",
+        help=f"serial device of the LoRa modem ({given % ('link.serial', '/dev/ttyUSB0')})",
+    )
+    run.add_argument(
+        "--offset",
+        type=cli.number(0, 500, above=True),
+        help=f"altitude offset, m ({given % ('offset.offset_m', '10.0')})",
+    )
+    run.add_argument(
+        "--max-altitude",
+        type=cli.number(0, 10_000, above=True),
+        help=f"metres above home ({given % ('offset.max_altitude_m', '120.0')})",
     )
     _log_flags(run, "log level (default: the config's, else info)")
     run.set_defaults(func=commands.run_command)
@@ -233,10 +306,14 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     from .autopilot import AutopilotError
     from .link.arq import LinkError
-    from .sim.px4 import Px4Error
 
     args = _parser().parse_args(argv)
-    return cli.run(args.func, args, (AutopilotError, LinkError, Px4Error))
+    expected: tuple[type[BaseException], ...] = (AutopilotError, LinkError)
+    if args.command == "replay":  # PX4 SITL only flies there (its import takes 0.1 s)
+        from .sim.px4 import Px4Error
+
+        expected += (Px4Error,)
+    return cli.run(args.func, args, expected)
 
 
 if __name__ == "__main__":

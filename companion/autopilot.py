@@ -15,9 +15,11 @@ vanished autopilot is an :class:`AutopilotError`, never a hang.
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from .autopilots import PX4, Personality
@@ -32,6 +34,55 @@ class AutopilotError(Exception):
 
 class RolledBack(AutopilotError):
     """The edit failed; the vehicle was verified to hold its previous mission again."""
+
+
+# The connection URLs MAVSDK 4 takes (its cli_arg.cpp); udp:// and tcp:// are its deprecated
+# spellings of udpin:// and tcpout://.
+URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcpout", "tcp", "serial", "serial_flowcontrol")
+# What MAVSDK's ConnectionResult names mean for someone who typed the URL.
+_CONNECT_HINTS = {
+    "SOCKET_ERROR": "is the address valid and one of this machine's?",
+    "BIND_ERROR": "is the address one of this machine's, and the port free?",
+    "SOCKET_CONNECTION_ERROR": "does anything listen at this address?",
+    "DESTINATION_IP_UNKNOWN": "the host name does not resolve",
+    "CONNECTION_ERROR": "is the device a serial port you may open?",
+    "BAUDRATE_UNKNOWN": "use a standard baud rate such as 57600 or 115200",
+    "CONNECTION_URL_INVALID": "see python -m companion run --help",
+}
+
+
+def check_url(url: str) -> str:
+    """``url`` if MAVSDK can take it, else a ValueError saying what is wrong: a known scheme,
+    then HOST:PORT with a port 1..65535 (an IP address for udpin/tcpin, which bind it) or
+    DEVICE:BAUD with a device that exists.  Checked before anything starts, since MAVSDK
+    itself says no more than ``CONNECTION_URL_INVALID``."""
+    scheme, sep, rest = url.partition("://")
+    if not sep or scheme not in URL_SCHEMES:
+        raise ValueError(
+            f"{url}: not a MAVSDK connection URL (schemes: {', '.join(URL_SCHEMES)}; e.g. "
+            "udpin://0.0.0.0:14540 or serial:///dev/ttyACM0:57600)"
+        )
+    if scheme.startswith("serial"):
+        device, sep, baud = rest.rpartition(":")
+        if not sep or not device or not baud.isdigit() or int(baud) == 0:
+            raise ValueError(f"{url}: expected {scheme}://DEVICE:BAUD (e.g. /dev/ttyACM0:57600)")
+        if not Path(device).exists():
+            raise ValueError(f"{url}: serial device {device} does not exist (is it plugged in?)")
+        return url
+    host, sep, port = rest.rpartition(":")
+    if not sep or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ValueError(f"{url}: expected {scheme}://HOST:PORT with a port 1..65535")
+    if scheme in ("udpin", "tcpin"):
+        try:
+            ipaddress.ip_address(host)
+        except ValueError:
+            raise ValueError(
+                f"{url}: {scheme} binds a local IP address, not {host!r} (0.0.0.0 for every "
+                "interface, 127.0.0.1 for this machine only)"
+            ) from None
+    elif not host and scheme not in ("udp", "tcp"):
+        raise ValueError(f"{url}: {scheme} needs the host to reach (e.g. 127.0.0.1)")
+    return url
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,8 +152,14 @@ class Autopilot:
     async def connect(
         cls, url: str, timeouts: Timeouts | None = None, personality: Personality = PX4
     ) -> Autopilot:
-        from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+        """Connect to the first autopilot heard on ``url`` (checked by :func:`check_url`);
+        MAVSDK's failures are an :class:`AutopilotError` that names the URL and a hint."""
+        from mavsdk.asyncio import ComponentType, Configuration, Mavsdk, MavsdkError
 
+        try:
+            check_url(url)
+        except ValueError as exc:
+            raise AutopilotError(str(exc)) from None
         timeouts = timeouts or Timeouts()
         config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
         mavsdk = Mavsdk(config)
@@ -110,6 +167,11 @@ class Autopilot:
         try:
             await mavsdk.add_any_connection(url)
             system = await mavsdk.first_autopilot(timeout_s=timeouts.connect_s)
+        except MavsdkError as exc:
+            await mavsdk.__aexit__(None, None, None)
+            reason = str(exc).rpartition(": ")[2]  # "Connection failed: SOCKET_ERROR"
+            hint = _CONNECT_HINTS.get(reason, "check the URL")
+            raise AutopilotError(f"{url}: MAVSDK cannot connect: {reason} ({hint})") from exc
         except BaseException:
             await mavsdk.__aexit__(None, None, None)
             raise

@@ -41,7 +41,10 @@ async def hub(args: argparse.Namespace) -> int:
         latency_s=args.latency,
     )
     channel = Channel(impairments, args.seed, collisions=not args.no_collisions)
-    hub = await UdpHub.serve(channel, args.host, args.port, Clock(args.time_scale))
+    try:
+        hub = await UdpHub.serve(channel, args.host, args.port, Clock(args.time_scale))
+    except OSError as exc:  # the address is taken, or not this machine's
+        raise cli.InputError(f"--host {args.host} --port {args.port}: {cli.describe(exc)}") from exc
     host, port = hub.address
     stop = _stop_on_signals()
     print(f"link hub on udp://{host}:{port} ({impairments})", flush=True)
@@ -67,7 +70,7 @@ async def mock(args: argparse.Namespace) -> int:
             lat, lon = round(home[0] * 1e7), round(home[1] * 1e7)
             mission[0] = mission[0].replace(x=lat, y=lon, z=home[2])
     faults = Faults(
-        drop_every=args.drop_every,
+        drop_every=args.drop_every or 0,
         latency_s=args.latency,
         ignore=frozenset(args.ignore or ()),
         reject_upload=args.reject_upload,
@@ -184,9 +187,13 @@ async def run(args: argparse.Namespace) -> int:
         transport = await UdpTransport.connect(settings.node, link.hub)
     endpoint = LinkEndpoint(settings.node, transport, profile(link.profile))
     log.info("node %d: connecting to the autopilot at %s", settings.node, settings.autopilot_url)
-    autopilot = await Autopilot.connect(
-        settings.autopilot_url, personality=personality(settings.ardupilot)
-    )
+    try:
+        autopilot = await Autopilot.connect(
+            settings.autopilot_url, personality=personality(settings.ardupilot)
+        )
+    except BaseException:
+        await transport.close()  # the link's socket and keep-alive end with the error
+        raise
     companion = Companion(settings, endpoint, autopilot, config.credentials)
     stop = _stop_on_signals()
     try:

@@ -59,6 +59,7 @@ from .auth.certificate import Certificate, CertificateError
 from .auth.keys import KeyFileError, PublicKey, read_private_key, read_public_key
 from .auth.session import Identity
 from .auth.trust import Operator, TrustStore, UnknownPeers
+from .autopilot import check_url
 from .failsafe import Action, FailsafeSettings
 from .link.airtime import PROFILES
 from .planner import OffsetSettings
@@ -66,6 +67,7 @@ from .runtime import CompanionSettings, Credentials
 from .tables import Table, TableError, load_toml
 
 PROFILE_NAMES = tuple(PROFILES)
+DEFAULT_AUTOPILOT = "udpin://0.0.0.0:14540"  # PX4 SITL instance 0's API link
 
 
 class ConfigError(TableError):
@@ -186,9 +188,14 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     def positive(table: Table, key: str, default: float, zero: bool = False) -> float:
         return table.number(key, default, low=0.0, above=not zero)
 
+    autopilot_url = doc.text("autopilot", DEFAULT_AUTOPILOT)
+    try:
+        check_url(autopilot_url)  # before the link or MAVSDK starts
+    except ValueError as exc:
+        raise doc.fail(str(exc), "autopilot") from None
     companion = functools.partial(
         CompanionSettings,
-        autopilot_url=doc.text("autopilot", "udpin://0.0.0.0:14540"),
+        autopilot_url=autopilot_url,
         ardupilot=doc.flag("ardupilot", False),
         suite=suites[suite],
         ot_security=ot_security,

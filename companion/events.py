@@ -70,6 +70,18 @@ FAILURES = frozenset(
         EventKind.TASK_FAILED,
     }
 )
+# a failure of any kind: a run, an answer, an edit, a hold or resume, a task
+FAILED = frozenset(
+    {
+        EventKind.RUN_FAILED,
+        EventKind.ANSWER_FAILED,
+        EventKind.UPLOAD_FAILED,
+        EventKind.PLAN_FAILED,
+        EventKind.HOLD_FAILED,
+        EventKind.RESUME_FAILED,
+        EventKind.TASK_FAILED,
+    }
+)
 # runs as Alice that ended, one way or the other
 RUN_ENDS = frozenset(
     {EventKind.RESULT, EventKind.RUN_FAILED, EventKind.YIELDED, EventKind.SETUP_RENEWED}
@@ -87,4 +99,4 @@ class Event:
     @property
     def failed(self) -> bool:
         """A failure of any kind (a run, an answer, an edit, a task)."""
-        return self.kind.endswith("_failed")
+        return self.kind in FAILED

@@ -19,6 +19,7 @@ from . import logs
 from .link.endpoint import LinkEndpoint
 from .link.stats import LinkStats
 from .roles import Role
+from .tasks import spawn
 
 log = logging.getLogger("companion.progress")
 EVERY_S = 15.0  # link seconds between progress lines
@@ -83,7 +84,7 @@ class RunProgress:
         return Totals.of(self.endpoint.stats) - self.start
 
     def __enter__(self) -> RunProgress:
-        self._task = asyncio.create_task(self._report(), name=f"progress {self.peer}")
+        self._task = spawn(self._report(), name=f"progress {self.peer}", log=log)
         return self
 
     def __exit__(self, *_: object) -> None:

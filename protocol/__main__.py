@@ -17,6 +17,13 @@ DESCRIPTION = (
     "path files, and benchmarks."
 )
 
+# The comparison over the simulated radio is the companion's (python -m companion compare).
+RADIO_OPTIONS = ("--link", "--loss", "--corrupt", "--seed", "--mtu")
+MOVED = (
+    f"the radio options ({', '.join(RADIO_OPTIONS)}) moved to `python -m companion compare` "
+    "(drone-deconflict compare)"
+)
+
 
 def _demo(_args: argparse.Namespace) -> int:
     from .tools.demo import run_demo
@@ -83,6 +90,8 @@ def _parser() -> argparse.ArgumentParser:
         help="public grid range R (default: the files' extent)",
     )
     compare.add_argument("--json", action="store_true", help="machine-readable output")
+    for option in RADIO_OPTIONS:
+        compare.add_argument(option, action=cli.Moved, to=MOVED)
     compare.set_defaults(func=_compare)
 
     bench = sub.add_parser("bench", help="benchmarks that print tables")

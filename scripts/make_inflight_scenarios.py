@@ -20,6 +20,10 @@ OUT = Path(__file__).resolve().parent.parent / "sitl_configs" / "scenarios"
 
 
 def at(east: float, north: float) -> tuple[float, float]:
+    """(lat, lon) ``east``/``north`` metres from C on a 6371 km sphere.  Not
+    :mod:`protocol.geodesy`'s ellipsoid, on purpose: the committed .plan files were written
+    with this sphere, and ``geodesy.moved`` would move their points by up to 4.5 m (checked:
+    inflight_star_east), which changes the replays' timing; switch when regenerating them."""
     lat = C[0] + math.degrees(north / 6_371_000.0)
     lon = C[1] + math.degrees(east / (6_371_000.0 * math.cos(math.radians(C[0]))))
     return lat, lon

@@ -4,12 +4,14 @@ before any work starts (protocol.tools.cli's rules).  Both packages' commands, o
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import shutil
 import socket
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -17,6 +19,8 @@ import pytest
 
 import companion.__main__ as companion_cli
 import protocol.__main__ as protocol_cli
+from companion.auth.certificate import Certificate
+from companion.auth.keys import SigningKey, write_private_key, write_public_key
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "sitl_configs" / "scenarios"
 PAPER = Path(__file__).resolve().parents[1] / "protocol" / "data" / "anchor"
@@ -50,12 +54,32 @@ def files(tmp_path: Path) -> Path:
     (tmp_path / "nanmission.toml").write_text(scenario.replace("good.plan", "nan.plan"))
     (tmp_path / "good.toml").write_text(scenario)
     (tmp_path / "config.toml").write_text("nod = 1\n")
+    (tmp_path / "nomission.toml").write_text(scenario.replace("good.plan", "gone.plan"))
+    identity = _identity(tmp_path, node=1)  # a config the companion would run with
+    (tmp_path / "ident.toml").write_text("node = 1\n" + identity)
+    (tmp_path / "badurl.toml").write_text('node = 1\nautopilot = "bogus://x"\n' + identity)
     (tmp_path / "paths.txt").write_text("(0,0)(10,10)\n")
     (tmp_path / "adir").mkdir()
     return tmp_path
 
 
+def _identity(folder: Path, node: int) -> str:
+    """An operator key, a drone key and its certificate for ``node`` in ``folder``: the
+    config's [identity] and [[trust.operator]] (as ``keys init|certify`` make them)."""
+    operator, drone = SigningKey.generate(), SigningKey.generate()
+    write_private_key(folder / "drone.key", drone)
+    write_public_key(folder / "acme.pub", operator.public)
+    start = int(time.time()) - 300
+    cert = Certificate.issue(operator, drone.public, node, start, start + 86400)
+    (folder / "drone.cert").write_bytes(cert.encode())
+    return (
+        '[identity]\nkey = "drone.key"\ncertificate = "drone.cert"\nstate_dir = "state"\n'
+        '[[trust.operator]]\nname = "acme"\nkey = "acme.pub"\n'
+    )
+
+
 C, P = "companion", "protocol"
+RUN = ["run", "--config", "{d}/ident.toml", "--autopilot"]  # a config that would run
 CASES: list[tuple[str, str, list[str], str]] = [
     # (id, package, argv with {d} for the files directory, what the line must say)
     ("plan-nan", C, ["mission", "show", "{d}/nan.plan"], "nan.plan: NaN is not a JSON number"),
@@ -85,12 +109,33 @@ CASES: list[tuple[str, str, list[str], str]] = [
         ["compare", "{d}/paths.txt", "{d}/paths.txt", "--link", "ideal", "--loss", "1.5"],
         "--loss: 1.5 is out of range",
     ),
-    ("run-no-node", C, ["run", "--autopilot", "bogus://x"], "node: a node id 1..65534 is required"),
+    ("run-no-node", C, ["run", "--autopilot", "udpin://0.0.0.0:14540"], "node: a node id 1..65534"),
     ("run-no-identity", C, ["run", "--node", "1"], "the companion needs an identity"),
     ("run-typo", C, ["run", "--config", "{d}/config.toml"], "unknown key 'nod' .did you mean"),
     ("run-node", C, ["run", "--node", "0"], "--node: 0 is out of range"),
+    ("run-url-scheme", C, [*RUN, "bogus://x"], "--autopilot: bogus://x: not a MAVSDK connection"),
+    ("run-url-port", C, [*RUN, "udpin://0.0.0.0:99999"], "with a port 1..65535"),
+    ("run-url-port-0", C, [*RUN, "udpout://127.0.0.1:0"], "with a port 1..65535"),
+    ("run-url-bind", C, [*RUN, "udpin://localhost:14540"], "udpin binds a local IP address"),
+    (
+        "run-url-serial",
+        C,
+        [*RUN, "serial:///dev/nonexist:57600"],
+        "serial device /dev/nonexist does not exist",
+    ),
+    ("run-url-baud", C, [*RUN, "serial:///dev/null"], "expected serial://DEVICE:BAUD"),
+    (
+        "run-url-config",
+        C,
+        ["run", "--config", "{d}/badurl.toml"],
+        "badurl.toml: autopilot: bogus://x: not a MAVSDK connection URL",
+    ),
     ("hub-port", C, ["link-hub", "--port", "99999"], "--port: 99999 is out of range"),
     ("hub-loss", C, ["link-hub", "--loss", "nan"], "--loss: 'nan' is not a finite number"),
+    ("hub-host", C, ["link-hub", "--host", "999.1.1.1"], "--host: '999.1.1.1' is neither an IP"),
+    ("mock-ignore", C, ["mock-autopilot", "--ignore", "BOGUS_MSG"], "'BOGUS_MSG' is not a MAVL"),
+    ("mock-ignore-typo", C, ["mock-autopilot", "--ignore", "MISION_COUNT"], "MISSION_COUNT\\?"),
+    ("mock-drop-0", C, ["mock-autopilot", "--drop-every", "0"], "--drop-every: 0 is out of"),
     ("mock-instance-300", C, ["mock-autopilot", "--instance", "300"], "--instance: 300 is out"),
     ("mock-instance-neg", C, ["mock-autopilot", "--instance", "-20"], "--instance: -20 is out"),
     ("mock-scale-0", C, ["mock-autopilot", "--time-scale", "0"], "--time-scale: 0 is out"),
@@ -123,6 +168,12 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ),
     ("replay-scale", C, ["replay", "{d}/scale.toml"], "time_scale: 0 is out of range"),
     ("replay-nan", C, ["replay", "{d}/nanmission.toml"], "drone 1: .*nan.plan: NaN is not"),
+    (
+        "replay-no-plan",
+        C,
+        ["replay", "{d}/nomission.toml"],
+        "nomission.toml: drone 1: mission: gone.plan does not exist \\(paths are relative",
+    ),
     ("replay-speed", C, ["replay", "{d}/good.toml", "--px4-speed", "0"], "--px4-speed: 0 is"),
     (
         "keys-node",
@@ -138,6 +189,18 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("p-compare-missing", P, ["compare", "{d}/missing.txt", "{d}/paths.txt"], "does not exist"),
     ("p-compare-plan", P, ["compare", "{d}/good.plan", "{d}/good.plan"], "python -m companion"),
     ("p-compare-range", P, ["compare", "{d}/paths.txt", "{d}/paths.txt", "--range", "0"], "0 is"),
+    (
+        "p-compare-loss",
+        P,
+        ["compare", "--loss", "0.2", "{d}/paths.txt", "{d}/paths.txt"],
+        "--loss: no such option here: the radio options .* moved to `python -m companion compare`",
+    ),
+    (
+        "p-compare-link",
+        P,
+        ["compare", "{d}/paths.txt", "{d}/paths.txt", "--link", "ideal"],
+        "--link: no such option here",
+    ),
 ]
 
 
@@ -189,6 +252,29 @@ def test_address_in_use_says_so_with_a_hint(capsys: pytest.CaptureFixture[str]) 
     assert "Address already in use" in line and "choose another port" in line
 
 
+@pytest.mark.parametrize(
+    ("url", "says"),
+    [
+        ("udpin://203.0.113.1:14540", "BIND_ERROR (is the address one of this machine's"),
+        ("serial:///dev/null:57600", "CONNECTION_ERROR (is the device a serial port you may"),
+    ],
+)
+def test_a_url_mavsdk_refuses_is_one_error_line(files: Path, url: str, says: str) -> None:
+    """A well-formed URL MAVSDK cannot open (an address not this machine's, a device that is
+    no serial port) ends as an expected error, exit 2, not a bug (exit 3).  In a process of
+    its own: ``run`` sets up logging, whose lines come before the error (the last line)."""
+    config = str(files / "ident.toml")
+    result = subprocess.run(
+        [sys.executable, "-m", "companion", "run", "--config", config, "--autopilot", url],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"error: {url}: MAVSDK cannot connect: ") and says in last, last
+
+
 def test_debug_shows_the_traceback(files: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code = companion_cli.main(["mission", "show", str(files / "nan.plan"), "--debug"])
     err = capsys.readouterr().err
@@ -222,3 +308,55 @@ def test_every_option_has_help() -> None:
 
     assert walk(companion_cli._parser(), "companion") == []
     assert walk(protocol_cli._parser(), "protocol") == []
+
+
+# Options that are off unless given (files to read or write): no default to show.
+NO_DEFAULT = {"--mission", "--trajectory", "--out", "--plot", "--export", "--px4", "--log-json"}
+NO_DEFAULT |= {"--config", "--operator"}
+
+
+def _options(parser: argparse.ArgumentParser, name: str) -> list[tuple[str, argparse.Action, str]]:
+    """(command, action, help as printed) of every option that takes a value."""
+    found = []
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child_name, child in action.choices.items():
+                found += _options(child, f"{name} {child_name}")
+        elif action.option_strings and action.nargs != 0 and action.help != argparse.SUPPRESS:
+            found.append((name, action, parser._get_formatter()._expand_help(action)))
+    return found
+
+
+def test_every_option_shows_its_default() -> None:
+    """``--help`` shows each option's default (0 and 0.0 too), or says what happens without
+    it; the run flags' defaults, which come from the config, name the config's own."""
+    from companion.config import load_config
+
+    options = _options(companion_cli._parser(), "companion")
+    options += _options(protocol_cli._parser(), "protocol")
+    missing = [
+        f"{name} {action.option_strings[-1]}: {text!r}"
+        for name, action, text in options
+        if (action.default is not None and str(action.default) not in text)
+        or (
+            action.default is None
+            and not action.required
+            and "default" not in text
+            and action.option_strings[-1] not in NO_DEFAULT
+        )
+    ]
+    assert missing == []
+    run = {a.option_strings[-1]: text for name, a, text in options if name == "companion run"}
+    config = load_config(None, {"node": 1})
+    link, settings = config.link, config.companion
+    expected = {
+        "--autopilot": settings.autopilot_url,
+        "--transport": link.transport,
+        "--profile": link.profile,
+        "--hub": f"{link.hub[0]}:{link.hub[1]}",
+        "--serial": link.serial,
+        "--offset": str(settings.offset.offset_m),
+        "--max-altitude": str(settings.offset.max_altitude_m),
+    }
+    for option, value in expected.items():
+        assert f"else {value})" in run[option], (option, run[option])

@@ -10,13 +10,13 @@ session's messages are sent one at a time and arrive in order.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import math
 import random
 import secrets
 from dataclasses import dataclass, field
 
+from ..tasks import spawn
 from .airtime import DutyCycle, LinkProfile
 from .arq import (
     LinkError,
@@ -76,7 +76,7 @@ class _Session:
     peer: int
     session: int
     last_heard: float
-    inbox: asyncio.Queue[bytes | PeerAborted] = field(default_factory=asyncio.Queue)
+    inbox: asyncio.Queue[bytes | LinkError] = field(default_factory=asyncio.Queue)
     send_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
     next_seq: int = 0
     aborted: PeerAborted | None = None
@@ -119,7 +119,7 @@ class LinkEndpoint:
         self._sessions: dict[tuple[int, int], _Session] = {}
         self._closed: dict[tuple[int, int], float] = {}
         self._aborted: dict[tuple[int, int], Frame] = {}
-        self._accept: asyncio.Queue[tuple[int, int]] = asyncio.Queue()
+        self._accept: asyncio.Queue[tuple[int, int] | LinkError] = asyncio.Queue()
         self._outgoing: dict[tuple[int, int, int], tuple[Outgoing, asyncio.Event]] = {}
         self._timers: dict[int, RetransmissionTimer] = {}
         self._tasks: list[asyncio.Task[None]] = []
@@ -133,17 +133,26 @@ class LinkEndpoint:
         self.radio.running = True
         self.transport.set_receiver(self._on_bytes)
         self._tasks = [
-            asyncio.create_task(self.radio.run(), name=f"link-tx-{self.node}"),
-            asyncio.create_task(self._housekeeping(), name=f"link-gc-{self.node}"),
+            spawn(work, name=f"link-{what}-{self.node}", log=log, on_failure=self._failed)
+            for what, work in (("tx", self.radio.run()), ("gc", self._housekeeping()))
         ]
+
+    def _failed(self, exc: BaseException) -> None:
+        """A link task died (logged by :func:`~companion.tasks.spawn`): the radio is gone, so
+        every send, receive and accept fails now with a LinkError instead of hanging."""
+        error = LinkError(f"node {self.node}: the link failed: {exc!r}")
+        self.radio.stop(error)
+        for _, acked in self._outgoing.values():
+            acked.set()  # its sender wakes, sees the error
+        for sess in self._sessions.values():
+            sess.inbox.put_nowait(error)
+        self._accept.put_nowait(error)
 
     async def close(self) -> None:
         self.radio.running = False
         for task in self._tasks:
             task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await asyncio.gather(*self._tasks, return_exceptions=True)  # a dead one was logged
         self.radio.fail_pending(LinkError("link endpoint closed"))
         await self.transport.close()
 
@@ -168,7 +177,11 @@ class LinkEndpoint:
     async def accept(self, timeout: float | None = None) -> tuple[int, int]:
         """Wait for a peer to start a session; its first message is ready to ``receive``."""
         async with self.clock.timeout(timeout):
-            return await self._accept.get()
+            item = await self._accept.get()
+        if isinstance(item, LinkError):
+            self._accept.put_nowait(item)  # for every other waiter too
+            raise item
+        return item
 
     def arrived(self, peer: int, session: int) -> float:
         """When (Unix seconds, :meth:`Clock.wall`) the first fragment of a session the peer
@@ -294,7 +307,7 @@ class LinkEndpoint:
                 item = await self.clock.wait_for(sess.inbox.get(), max(remaining, 0.0))
             except TimeoutError:
                 continue
-            if isinstance(item, PeerAborted):
+            if isinstance(item, LinkError):  # the peer aborted, or the link failed
                 raise item
             self.stats.messages_received += 1
             log.debug(
@@ -313,6 +326,8 @@ class LinkEndpoint:
             await sent
 
     def _raise_if_aborted(self, sess: _Session) -> None:
+        if self.radio.error is not None:
+            raise self.radio.error
         if sess.aborted is not None:
             raise sess.aborted
         if (sess.peer, sess.session) not in self._sessions:

@@ -54,6 +54,7 @@ class Transmitter:
         self.transport, self.profile, self.duty = transport, profile, duty
         self.stats, self.clock = stats, clock
         self.running = False
+        self.error: LinkError | None = None  # why it stopped for good (its task died)
         self._control: deque[_TxItem] = deque()
         self._data: deque[_TxItem] = deque()
         self._wake = asyncio.Event()
@@ -61,7 +62,7 @@ class Transmitter:
     def enqueue(self, data: bytes, *, control: bool) -> asyncio.Future[float]:
         """Queue one encoded frame; the future gives the link time it finished leaving."""
         if not self.running:
-            raise LinkError("link endpoint is not running")
+            raise self.error or LinkError("link endpoint is not running")
         done: asyncio.Future[float] = asyncio.get_running_loop().create_future()
         item = _TxItem(data, self.profile.airtime(len(data)), control, done)
         (self._control if control else self._data).append(item)
@@ -76,6 +77,13 @@ class Transmitter:
                 item.done.add_done_callback(_consume)
         self._control.clear()
         self._data.clear()
+
+    def stop(self, error: LinkError) -> None:
+        """The radio is gone for good (its task died): every queued and later frame fails
+        with ``error``."""
+        self.running = False
+        self.error = error
+        self.fail_pending(error)
 
     async def run(self) -> None:
         deferred_since: float | None = None

@@ -19,6 +19,7 @@ import logging
 import struct
 from typing import cast
 
+from ..tasks import spawn
 from .airtime import PHY_MAX_FRAME
 from .clock import Clock
 from .medium import Channel, Receiver
@@ -108,7 +109,7 @@ class UdpTransport(asyncio.DatagramProtocol):
         )
         radio.hub = hub
         radio._register()
-        radio._keepalive = asyncio.create_task(radio._keep_registered())
+        radio._keepalive = spawn(radio._keep_registered(), name=f"link-keepalive-{node}", log=log)
         await asyncio.sleep(0.01)  # let the registration reach the hub first
         return radio
 

@@ -30,8 +30,14 @@ def _read(path: str | Path) -> str:
         if p.stat().st_size > MAX_FILE_BYTES:
             raise MissionError(f"{p}: larger than {MAX_FILE_BYTES} bytes")
         return p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MissionError(f"{p}: {exc}") from None
+    except FileNotFoundError:
+        raise MissionError(f"{p}: does not exist") from None
+    except IsADirectoryError:
+        raise MissionError(f"{p}: is a directory") from None
+    except OSError as exc:  # one line without the "[Errno N]" of str(exc)
+        raise MissionError(f"{p}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise MissionError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
 
 
 def _xy(frame: int, lat: float, lon: float) -> tuple[int, int]:

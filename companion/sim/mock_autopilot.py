@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import math
 import time
 from typing import Any
@@ -25,12 +26,14 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from ..link.clock import Clock
 from ..mission import MissionItem
+from ..tasks import spawn
 from . import mock_links as wire
 from .mock_flight import FlightModel, MockFlight
 from .mock_links import PX4_BIND, PX4_GCS_BIND, PX4_GCS_SEND, PX4_SEND, Faults, Link
 from .mock_missions import item_message
 
 __all__ = ["PX4_BIND", "PX4_SEND", "Faults", "FlightModel", "MockAutopilot", "item_message"]
+log = logging.getLogger(__name__)
 
 
 class MockAutopilot(MockFlight):
@@ -106,9 +109,9 @@ class MockAutopilot(MockFlight):
             raise
         self._started = time.monotonic()
         self.origin = self.now() if origin is None else origin
-        self._tasks = [
-            asyncio.create_task(self._heartbeats()),
-            asyncio.create_task(self._fly()),
+        self._tasks = [  # a failure is logged when it happens (the mock would go quiet)
+            spawn(self._heartbeats(), name=f"mock-{self.sysid}-heartbeats", log=log),
+            spawn(self._fly(), name=f"mock-{self.sysid}-flight", log=log),
         ]
         return self
 

@@ -12,9 +12,9 @@ identities; ``auth_bytes`` says what that added.
 
 from __future__ import annotations
 
-import asyncio
 import functools
 import itertools
+import logging
 import tempfile
 from collections.abc import Sequence
 from dataclasses import asdict
@@ -44,9 +44,11 @@ from ..link import (
 )
 from ..mission import MissionError
 from ..missionfile import read_mission_file
+from ..tasks import spawn
 from .fleet import make_fleet
 
 ALICE_NODE, BOB_NODE = 1, 2
+log = logging.getLogger(__name__)
 
 
 async def _run(
@@ -85,7 +87,7 @@ async def _run(
             route = Route(ALICE_NODE, BOB_NODE, session)
             return Initiator(fleet[0], fleet[1].cert, route, clock.wall())
 
-        bob_task = asyncio.create_task(bob_side())
+        bob_task = spawn(bob_side(), name="bob", log=log)  # logged even if Alice fails first
         try:
             report = await run_alice(a, BOB_NODE, alice, secure=secure if fleet else None)
         except BaseException:

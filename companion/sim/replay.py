@@ -30,6 +30,7 @@ from ..failsafe import FailsafeSettings
 from ..link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
 from ..planner import OffsetSettings
 from ..runtime import Companion, CompanionSettings
+from ..tasks import spawn
 from .fleet import make_fleet
 from .metrics import build_report
 from .mock_autopilot import FlightModel, MockAutopilot
@@ -164,7 +165,7 @@ async def run_replay(
         if progress:
             print(f"  ... {message}", file=sys.stderr, flush=True)
 
-    ticker = asyncio.create_task(paced.tick()) if paced is not None else None
+    ticker = spawn(paced.tick(), name="paced-clock", log=log) if paced is not None else None
     try:
         for d in scenario.drones:
             vehicle: ReplayVehicle

@@ -3,7 +3,8 @@
 Typed (:class:`ReplayReport`, one :class:`DroneReport` per drone, one :class:`PairReport` per
 pair); :meth:`ReplayReport.to_json` is what ``replay --json`` prints, field for field.
 ``problems`` is everything that makes a replay a failure (exit 1), ``notes`` what the summary
-states without failing it; ``ok`` only when there is no problem.  Names carry their units
+states without failing it (its last line is then ``OK (with notes): ...``, never a bare
+``OK``); ``ok`` only when there is no problem.  Names carry their units
 (``_m``, ``_s``, ``_m_amsl``).  The measuring is :mod:`companion.sim.metrics`.
 """
 
@@ -238,5 +239,25 @@ def format_report(report: ReplayReport) -> str:
         lines.append(f"FAILED ({len(report.problems)} problem(s)):")
         lines.extend(f"  - {line}" for line in report.problems)
     else:
-        lines.append("OK: every mission flown, every conflict resolved by a verified action")
+        lines.append(_verdict(report))
     return "\n".join(lines)
+
+
+def _verdict(report: ReplayReport) -> str:
+    """The last line of a replay without problems: a bare ``OK`` only when nothing is noted,
+    so a reader never sees it under failed runs or precautions (which do not fail a replay:
+    retries on a lossy link are normal)."""
+    precautions = sum(len(d.precautionary) for d in report.drones)
+    how = "" if precautions else " by a verified action"
+    verdict = f"every mission flown, every conflict resolved{how}"
+    if not report.notes:
+        return f"OK: {verdict}"
+    failed = sum(1 for d in report.drones for f in d.failures if f["kind"] not in FAILURES)
+    unfinished = sum(d.runs_unfinished for d in report.drones)
+    counts = [
+        (failed, "run(s) failed and were retried"),
+        (precautions, "precautionary action(s) taken"),
+        (unfinished, "run(s) never finished"),
+    ]
+    said = ", ".join(f"{n} {what}" for n, what in counts if n)
+    return f"OK (with notes): {verdict}; but {said or 'see the notes'} (Notes above)"

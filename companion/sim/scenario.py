@@ -109,8 +109,15 @@ def load_scenario(path: str | Path) -> Scenario:
         ids.add(ident)
         kind = raw.text("autopilot", "px4", ("px4", "ardupilot"))
         mission_file = raw.text("mission")
+        mission_path = path.parent / mission_file
+        if not mission_path.is_file():
+            what = "is a directory" if mission_path.is_dir() else "does not exist"
+            raise raw.fail(
+                f"{mission_file} {what} (paths are relative to the scenario's folder)",
+                "mission",
+            )
         try:
-            plan = read_mission_file(path.parent / mission_file)  # errors name the file
+            plan = read_mission_file(mission_path)  # errors name the file
         except MissionError as exc:
             raise raw.fail(str(exc)) from None
         try:

@@ -9,17 +9,20 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 from typing import Protocol
 
 from ..link.clock import Clock
 from ..mission import MissionItem
+from ..tasks import spawn
 from .mock_autopilot import Faults, FlightModel, MockAutopilot
 from .px4 import Px4Build, Px4Error, Px4Vehicle
 
 Track = list[tuple[float, float, float, float]]  # (simulated s, lat, lon, alt AMSL)
 RESOLVED_TOLERANCE_M = 0.5  # two mocks: a pair is resolved at the offset minus this
-SAMPLE_S = 0.05
-HELD_TRIES = 3  # real seconds between track samples of a PX4 vehicle
+SAMPLE_S = 0.05  # real seconds between track samples of a PX4 vehicle
+HELD_TRIES = 3  # downloads of the mission a PX4 vehicle holds, before giving up
+log = logging.getLogger(__name__)
 
 
 class ReplayVehicle(Protocol):
@@ -150,7 +153,7 @@ class Px4SitlVehicle:
         self._origin = origin
         await self.vehicle.start()
         await self.vehicle.upload_mission(self.mission)
-        self._sampler = asyncio.create_task(self._sample())
+        self._sampler = spawn(self._sample(), name="px4-track-sampler", log=log)
 
     def restart_clock(self, origin: float) -> None:
         self._origin = origin

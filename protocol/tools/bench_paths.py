@@ -163,7 +163,7 @@ def format_paper(result: dict[str, Any]) -> str:
         "| security | 112-bit, nothing leaked | 80-bit DGK, leaks every bit | - |",
         "",
         f"Routes (grid range +-{result['route_grid_range']}, "
-        f"l = {result['route_comparison_bits']}):",
+        f"l = {result['route_comparison_bits']}; single run per route, not medians):",
         "",
         "| route | m x n | hit segments | plaintext | expected any | bytes "
         "| Alice CPU s | Bob CPU s |",

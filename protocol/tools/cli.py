@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import argparse
 import errno
+import ipaddress
 import math
 import os
+import socket
 import sys
 import tempfile
 import traceback
@@ -77,11 +79,11 @@ class HelpFormatter(argparse.HelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help or ""
-        if (
-            action.default in (None, False, argparse.SUPPRESS)
-            or "default" in text
-            or not action.option_strings
-        ):
+        default = action.default
+        # by identity: a default of 0 or 0.0 equals False, and must be shown all the same
+        if default is None or default is False or default is argparse.SUPPRESS:
+            return text
+        if "default" in text or not action.option_strings:
             return text
         return f"{text} (default: %(default)s)"
 
@@ -205,6 +207,42 @@ probability = number(0.0, 1.0, below=True)  # a loss or corruption rate: 1 would
 port = integer(1, 65535)
 listen_port = integer(0, 65535)  # 0: any free port, which the program then prints
 seed = integer(0, 2**64 - 1)
+
+
+def host(text: str) -> str:
+    """An address to bind or reach: an IP address, or a host name this machine resolves."""
+    try:
+        ipaddress.ip_address(text)
+        return text
+    except ValueError:
+        pass
+    try:
+        socket.getaddrinfo(text, None, type=socket.SOCK_DGRAM)
+    except (OSError, UnicodeError):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is neither an IP address nor a known host name (e.g. 127.0.0.1 for "
+            "this machine, 0.0.0.0 for every interface)"
+        ) from None
+    return text
+
+
+class Moved(argparse.Action):
+    """An option that moved to another command: using it is an error that says where to
+    (rather than argparse's guess, which reads its value as the next positional argument)."""
+
+    def __init__(self, option_strings: list[str], dest: str, *, to: str, **kwargs: object) -> None:
+        kwargs.update(nargs="?", help=argparse.SUPPRESS, default=argparse.SUPPRESS)
+        super().__init__(option_strings, dest, **kwargs)  # type: ignore[arg-type]
+        self.to = to
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: object,
+        option_string: str | None = None,
+    ) -> None:
+        parser.error(f"{option_string}: no such option here: {self.to}")
 
 
 def integers(low: int, high: int) -> Callable[[str], tuple[int, ...]]:

@@ -10,7 +10,6 @@ Malformed input raises :class:`InputFormatError` naming the file and line.
 
 from __future__ import annotations
 
-import math
 import re
 from pathlib import Path
 
@@ -45,12 +44,6 @@ def parse_paper_text(text: str, source: str = "<text>") -> list[tuple[Point, ...
     if not cases:
         raise InputFormatError(f"{source}: no paths")
     return cases
-
-
-def _degE7(value: object, what: str, source: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise InputFormatError(f"{source}: {what} is not a number")
-    return round(value * 1e7)
 
 
 def read_text(path: str | Path) -> str:

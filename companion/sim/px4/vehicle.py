@@ -22,6 +22,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from ...tasks import spawn
 from . import build as instances
 from .build import (
     ALREADY_RUNNING,
@@ -179,7 +180,9 @@ class Px4Vehicle(Px4Missions):
             lambda: GcsLink(("127.0.0.1", self.gcs_port), self._on_message),
             local_addr=("127.0.0.1", 0),
         )
-        self._heartbeat_task = asyncio.create_task(self._heartbeats())
+        self._heartbeat_task = spawn(
+            self._heartbeats(), name=f"px4-{self.instance}-heartbeats", log=log
+        )
         try:
             await self.wait_until(
                 lambda: READY_LINE in self.log_text() and "HEARTBEAT" in self.last,

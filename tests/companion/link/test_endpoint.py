@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 import os
 from collections.abc import Callable
 
@@ -329,3 +330,41 @@ def test_a_message_is_not_delivered_twice_when_its_ack_is_lost_past_the_idle_tim
             assert clock.now() > window[1]  # the blackout outlasted the idle timeout
 
     run_simulated(main())
+
+
+def test_a_dying_link_task_is_logged_and_fails_every_waiter(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The transmit task dies (the radio raised): it is logged at once with its traceback and
+    as a task_failed event, and a pending send, a receive and an accept get a LinkError
+    instead of waiting for a timeout (or forever); closing afterwards is clean."""
+
+    async def main() -> None:
+        async with pair(PROFILES["us915-sf7"]) as p:
+            sent = 0
+
+            async def transmit(frame: bytes, airtime: float) -> None:
+                nonlocal sent
+                sent += 1
+                if sent > 2:
+                    raise OSError(5, "Input/output error")  # the modem was unplugged
+                await p.a.clock.sleep(airtime)
+
+            p.a.transport.transmit = transmit  # type: ignore[method-assign]
+            session = p.a.open(2)
+            receiving = asyncio.create_task(p.a.receive(2, session))
+            accepting = asyncio.create_task(p.a.accept())
+            with pytest.raises(LinkError, match="the link failed: OSError"):
+                await p.a.send(2, session, os.urandom(5000))  # more than two frames
+            for waiter in (receiving, accepting):
+                with pytest.raises(LinkError, match="the link failed"):
+                    await waiter
+            with pytest.raises(LinkError, match="the link failed"):
+                await p.a.send(2, p.a.open(2), b"later")
+
+    with caplog.at_level(logging.ERROR, logger="companion.link"):
+        run_simulated(main())
+    (record,) = [r for r in caplog.records if getattr(r, "event", None) == "task_failed"]
+    assert record.getMessage().startswith("task link-tx-1 failed: OSError")
+    assert record.exc_info is not None and record.exc_info[0] is OSError  # the traceback
+    assert record.fields["task"] == "link-tx-1"  # type: ignore[attr-defined]
