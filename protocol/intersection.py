@@ -26,6 +26,7 @@ what each message shows its receiver.
 from __future__ import annotations
 
 import enum
+import functools
 from collections.abc import Callable, MutableMapping, Sequence
 from dataclasses import dataclass, field
 
@@ -194,6 +195,13 @@ class BobKeys:
         return put_blob(self.paillier.public_key.to_bytes()) + put_blob(
             self.dgk.public_key.to_bytes()
         )
+
+    @functools.cached_property
+    def paillier_proof(self) -> bytes:
+        """The proof that the Paillier modulus is fit (:mod:`protocol.keyproof`), made once."""
+        from .keyproof import prove
+
+        return prove(self.paillier)
 
 
 PathSource = Sequence[Point] | Callable[[Hello], Sequence[Point]]

@@ -27,6 +27,7 @@ import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from . import keyproof
 from .circuit import Circuit
 from .comparison import (
     BitDecompositions,
@@ -56,7 +57,7 @@ from .intersection import (
 from .paillier import PaillierCiphertext, PaillierPublicKey
 from .params import check_kappa
 from .pathcircuit import Orient, Proj
-from .wire import NONCE_SIZE, Hello, MsgType, Suite, frame, take_blob, unframe
+from .wire import NONCE_SIZE, Hello, MsgType, Suite, frame, put_blob, take_blob, unframe
 
 MAX_KEY_BYTES = 3 * (MAX_MODULUS_BITS // 8) + 4
 
@@ -209,6 +210,7 @@ class PaperAlice(AliceSide):
         self.paillier = PaillierPublicKey.from_bytes(paillier_key, insecure_for_tests=self.insecure)
         self.dgk = read_dgk_key(take_blob(reader), self.insecure)
         self.peer_keys = body[start : reader.offset]  # as BobKeys.public_bytes() wrote them
+        keyproof.verify(self.paillier, take_blob(reader))  # before any of Bob's ciphertexts
         if 3 * self.l + 3 >= self.dgk.plaintext_modulus:
             raise RemoteProtocolError("peer's DGK plaintext space is too small")
         self.w = slot_bits(self.l, self.kappa)
@@ -327,7 +329,8 @@ class PaperBob(BobSide):
                 chunk = vector[start : start + per]
                 value = sum(v << (self.w * s) for s, v in enumerate(chunk))
                 cts.append(pub.encrypt(value).to_bytes())
-        body = n.to_bytes(2, "big") + keys.public_bytes() + b"".join(cts)
+        proof = put_blob(keys.paillier_proof)
+        body = n.to_bytes(2, "big") + keys.public_bytes() + proof + b"".join(cts)
         self._reply = frame(MsgType.KEYS, 2, body)
         self.state = State.RUNNING
         self.step = 3
