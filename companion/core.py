@@ -219,6 +219,11 @@ class CompanionCore:
             self.record(EventKind.TASK_FAILED, task=task.get_name(), error=repr(exc))
 
     @property
+    def in_run(self) -> bool:
+        """A run is on the air, as Alice or as Bob."""
+        return self._sessions > 0
+
+    @property
     def comparing(self) -> bool:
         """A comparison as Alice is under way or half done (a drone about to take off waits
         for it)."""

@@ -230,7 +230,8 @@ async def run_replay(
                 told[ident] = len(companion.events)
             for d in scenario.drones:
                 gone = companions.get(d.id)
-                if d.companion_stop_s is not None and sim >= d.companion_stop_s and gone:
+                due = d.companion_stop_s is not None and sim >= d.companion_stop_s
+                if due and gone and (gone.in_run or not d.companion_stop_in_run):
                     await gone.stop()  # the peer vanishes: its radio goes silent
                     vanished[d.id] = companions.pop(d.id)
                     say(f"t={sim:.0f} s: drone {d.id}'s companion vanishes")

@@ -51,6 +51,7 @@ class DroneSpec:
     ardupilot: bool = False
     faults: Faults = field(default_factory=Faults)  # of its mock autopilot
     companion_stop_s: float | None = None  # the companion vanishes at this simulated time
+    companion_stop_in_run: bool = False  # ... or later, once it has a run on the air
     hold_for_comparisons: bool = True  # on the ground, take-off waits for a running run
     operator: str = "fleet"  # whose certificate it flies with
 

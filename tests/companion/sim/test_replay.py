@@ -242,8 +242,9 @@ def test_fault_peer_vanishes_mid_run() -> None:
     """Drone 2's companion vanishes while they compare (its drone flies on): drone 1's run
     fails, no result ever comes.  Once airborne, drone 1 cannot know where the silent peer
     is by now: with no run under way, the fail-safe's guard climbs over what it could reach."""
-    # while they compare (discovery, with certificates, takes one to a few beacon intervals)
-    scenario = _drone(_crossing(), 2, companion_stop_s=35.0)
+    # while they compare: at 35 s or, if discovery (with certificates, one to a few beacon
+    # intervals) took longer, once drone 2 is answering
+    scenario = _drone(_crossing(), 2, companion_stop_s=35.0, companion_stop_in_run=True)
     report = asyncio.run(run_replay(scenario)).report.to_json()
     alice = report["drones"][0]
     assert any(f["kind"] == "run_failed" for f in alice["failures"])
