@@ -171,7 +171,12 @@ class BobAnswers(CompanionCore):
             return None
         try:
             ticket = self.ledger.admit(
-                known.identity, operator.key.fingerprint, operator.max_runs_per_hour, wall, BOB
+                known.identity,
+                operator.key.fingerprint,
+                operator.max_runs_per_hour,
+                wall,
+                BOB,
+                bits=hello.m,
             )
         except BudgetExceeded as exc:
             self.record(EventKind.BUDGET, peer=peer, error=str(exc))

@@ -25,13 +25,15 @@ class Scope(enum.Enum):
     DRONE = "drone"
     OPERATOR = "operator"
     TOTAL = "total"
+    DRONE_BITS = "drone answer-bit"  # what one drone may learn of us, whatever it computes
 
 
 class BudgetExceeded(Exception):
     """No run now: ``scope`` says which limit is used up."""
 
     def __init__(self, scope: Scope, limit: int, window_s: float) -> None:
-        super().__init__(f"{scope.value} limit of {limit} runs per {window_s:.0f} s reached")
+        unit = "bits" if scope is Scope.DRONE_BITS else "runs"
+        super().__init__(f"{scope.value} limit of {limit} {unit} per {window_s:.0f} s reached")
         self.scope = scope
 
 
@@ -40,9 +42,13 @@ class RunLimits:
     per_drone: int = 8  # an in-flight encounter takes a near and a full run
     total: int = 64  # all peers together
     window_s: float = 3600.0
+    # Answer bits (Alice's padded segments m of each run) one drone may open per window: a
+    # deviating Alice can make each of her m output bits a predicate of her choice
+    # (docs/security.md, D6), so this, not the run count, bounds what she learns of us.
+    bits_per_drone: int = 256
 
     def __post_init__(self) -> None:
-        if min(self.per_drone, self.total) < 1 or self.window_s <= 0:
+        if min(self.per_drone, self.total, self.bits_per_drone) < 1 or self.window_s <= 0:
             raise ValueError("run limits must be positive")
 
 
@@ -51,30 +57,48 @@ class RunLedger:
         self.store, self.limits = store, limits
 
     def check(
-        self, drone: bytes, operator: bytes, operator_limit: int, now: float, role: Role = BOB
+        self,
+        drone: bytes,
+        operator: bytes,
+        operator_limit: int,
+        now: float,
+        role: Role = BOB,
+        bits: int = 0,
     ) -> None:
         """Raise :class:`BudgetExceeded` if one more run in ``role`` with ``drone`` (of
-        ``operator``, whose drones may ask ``operator_limit`` runs per window together) is
-        too many.  As Alice only the per-drone limit applies."""
+        ``operator``, whose drones may ask ``operator_limit`` runs per window together), one
+        that opens ``bits`` answer bits to it, is too many.  As Alice only the per-drone run
+        limit applies."""
         since = now - self.limits.window_s
         count = self.store.count_runs
-        checks = [(Scope.DRONE, self.limits.per_drone, count(since, role, drone=drone))]
+        checks = [(Scope.DRONE, self.limits.per_drone, count(since, role, drone=drone) + 1)]
         if role == BOB:
             checks += [
-                (Scope.OPERATOR, operator_limit, count(since, role, operator=operator)),
-                (Scope.TOTAL, self.limits.total, count(since, role)),
+                (Scope.OPERATOR, operator_limit, count(since, role, operator=operator) + 1),
+                (Scope.TOTAL, self.limits.total, count(since, role) + 1),
+                (
+                    Scope.DRONE_BITS,
+                    self.limits.bits_per_drone,
+                    count(since, role, drone=drone, bits=True) + bits,
+                ),
             ]
-        for scope, limit, used in checks:
-            if used >= limit:
+        for scope, limit, wanted in checks:
+            if wanted > limit:
                 raise BudgetExceeded(scope, limit, self.limits.window_s)
 
     def admit(
-        self, drone: bytes, operator: bytes, operator_limit: int, now: float, role: Role = BOB
+        self,
+        drone: bytes,
+        operator: bytes,
+        operator_limit: int,
+        now: float,
+        role: Role = BOB,
+        bits: int = 0,
     ) -> int:
         """Check, then count one run; its ticket, for :meth:`refund`."""
-        self.check(drone, operator, operator_limit, now, role)
+        self.check(drone, operator, operator_limit, now, role, bits)
         self.store.forget_runs(now - 2 * self.limits.window_s)
-        return self.store.record_run(now, drone, operator, role)
+        return self.store.record_run(now, drone, operator, role, bits)
 
     def refund(self, ticket: int) -> None:
         """Give back a run that taught its requester nothing."""

@@ -33,6 +33,7 @@
     [limits]
     max_runs_per_peer = 8                 # runs one certified drone may ask of us per hour
     max_runs_total = 64                   # runs all drones together may ask of us per hour
+    max_answer_bits_per_peer = 256        # answer bits (segments of its runs) per drone per hour
     max_clock_skew_s = 30.0               # beacons and requests further off: refused
     run_timeout_s = 900.0
     beacon_interval_s = 10.0
@@ -205,6 +206,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         grid_radius_m=positive(limits, "grid_radius_m", 500.0),
         max_runs_per_peer=limits.integer("max_runs_per_peer", 8, low=1),
         max_runs_total=limits.integer("max_runs_total", 64, low=1),
+        max_answer_bits_per_peer=limits.integer("max_answer_bits_per_peer", 256, low=1),
         max_clock_skew_s=positive(limits, "max_clock_skew_s", 30.0),
         run_timeout_s=positive(limits, "run_timeout_s", 900.0),
         lookahead_s=positive(limits, "lookahead_s", 60.0, zero=True),

@@ -67,6 +67,7 @@ class CompanionSettings:
     grid_radius_m: float = 500.0  # smallest comparison box; doubled until it holds Alice's path
     max_runs_per_peer: int = 8  # runs a certified drone may ask of us per window
     max_runs_total: int = 64  # runs all peers together may ask of us per window
+    max_answer_bits_per_peer: int = 256  # answer bits (segments x runs) one drone may get
     run_window_s: float = 3600.0
     max_clock_skew_s: float = 30.0  # beacons and run requests further off our clock: refused
     run_timeout_s: float | None = None
@@ -146,7 +147,12 @@ class CompanionCore:
         )
         self.ledger = RunLedger(
             self.store,
-            RunLimits(settings.max_runs_per_peer, settings.max_runs_total, settings.run_window_s),
+            RunLimits(
+                settings.max_runs_per_peer,
+                settings.max_runs_total,
+                settings.run_window_s,
+                settings.max_answer_bits_per_peer,
+            ),
         )
         self._order: int | None = None  # (time, counter) of our last beacon
         self._cert_sent = -math.inf

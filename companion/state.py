@@ -18,7 +18,7 @@ from pathlib import Path
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS runs (t REAL NOT NULL, drone BLOB NOT NULL, operator BLOB NOT NULL,
-                                 role TEXT NOT NULL);
+                                 role TEXT NOT NULL, bits INTEGER NOT NULL DEFAULT 0);
 CREATE INDEX IF NOT EXISTS runs_t ON runs (t);
 CREATE TABLE IF NOT EXISTS requests (key BLOB PRIMARY KEY, t REAL NOT NULL);
 CREATE TABLE IF NOT EXISTS counters (drone BLOB PRIMARY KEY, counter INTEGER NOT NULL);
@@ -41,6 +41,9 @@ class StateStore:
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=NORMAL")
             self._db.executescript(_SCHEMA)
+            columns = {row[1] for row in self._db.execute("PRAGMA table_info(runs)")}
+            if "bits" not in columns:  # a state directory from before the answer-bit budget
+                self._db.execute("ALTER TABLE runs ADD COLUMN bits INTEGER NOT NULL DEFAULT 0")
         except (OSError, sqlite3.Error) as exc:
             raise StateError(f"state directory {self.directory}: {exc}") from None
 
@@ -49,10 +52,12 @@ class StateStore:
 
     # ------------------------------------------------------------------ runs
 
-    def record_run(self, t: float, drone: bytes, operator: bytes, role: str) -> int:
-        """Count one run; its ticket (to give it back with :meth:`forget_run`)."""
+    def record_run(self, t: float, drone: bytes, operator: bytes, role: str, bits: int = 0) -> int:
+        """Count one run (``bits``: the answer bits it opens to its requester); its ticket
+        (to give it back with :meth:`forget_run`)."""
         cursor = self._db.execute(
-            "INSERT INTO runs VALUES (?, ?, ?, ?)", (t, drone, operator, role)
+            "INSERT INTO runs (t, drone, operator, role, bits) VALUES (?, ?, ?, ?, ?)",
+            (t, drone, operator, role, bits),
         )
         assert cursor.lastrowid is not None
         return cursor.lastrowid
@@ -67,8 +72,11 @@ class StateStore:
         *,
         drone: bytes | None = None,
         operator: bytes | None = None,
+        bits: bool = False,
     ) -> int:
-        query = "SELECT COUNT(*) FROM runs WHERE t > ? AND role = ?"
+        """Runs since ``since`` (or, with ``bits``, the answer bits they opened)."""
+        what = "COALESCE(SUM(bits), 0)" if bits else "COUNT(*)"
+        query = f"SELECT {what} FROM runs WHERE t > ? AND role = ?"  # noqa: S608 (fixed text)
         args: list[object] = [since, role]
         if drone is not None:
             query += " AND drone = ?"

@@ -13,12 +13,14 @@ import dataclasses
 import secrets
 import statistics
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
 from ..geometry import Point, path_hits
 from ..grid import GridKind, GridSpec
 from ..intersection import Alice, Bob
+from ..ot import check
 from ..ot.setup import DEFAULT_SECURITY
 from ..wire import Suite
 from .compare import Case, Party, describe_once, load_cases, params_of, run_case
@@ -38,6 +40,47 @@ PAPER_CODE_QUOTED = {
     "key_bytes": 20_200_000,
     "security_bits": 80,
 }
+
+
+class CheckCost:
+    """What malicious security adds to the runs measured while it is active: the OT
+    consistency check's CPU (Bob's reply, Alice's check: the real calls of the run, timed)
+    and, per run, its bytes (:func:`protocol.ot.check.added_bytes`) or the paper suite's
+    key proof.  A tool's instrument: it wraps :mod:`protocol.ot.check` for the duration."""
+
+    def __enter__(self) -> CheckCost:
+        self.bob_s = self.alice_s = 0.0
+        self._respond, self._verify = check.respond, check.verify
+
+        def respond(*args: Any, **kwargs: Any) -> bytes:
+            start = time.process_time()
+            try:
+                return self._respond(*args, **kwargs)
+            finally:
+                self.bob_s += time.process_time() - start
+
+        def verify(*args: Any, **kwargs: Any) -> None:
+            start = time.process_time()
+            try:
+                self._verify(*args, **kwargs)
+            finally:
+                self.alice_s += time.process_time() - start
+
+        check.respond, check.verify = respond, verify
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        check.respond, check.verify = self._respond, self._verify
+
+
+def _run(case: Case, party: Party) -> dict[str, Any]:
+    """One case through the loopback (:func:`run_case`), with the CPU the OT consistency
+    check took in it (its bytes are in ``run_case``'s ``malicious_bytes``)."""
+    with CheckCost() as cost:
+        result = run_case(case, party)
+    result["malicious_cpu_s_alice"] = cost.alice_s
+    result["malicious_cpu_s_bob"] = cost.bob_s
+    return result
 
 
 def _say(progress: bool, message: str) -> None:
@@ -66,6 +109,10 @@ def _summary(results: list[dict[str, Any]], pairs: list[int]) -> dict[str, Any]:
         "median_bytes_bob_to_alice": ba,
         "median_bytes_total": statistics.median(x + y for _, _, x, y in per_pair),
         "messages": max(r["messages"] for r in results),
+        "median_malicious_bytes": statistics.median(r["malicious_bytes"] for r in results),
+        "median_malicious_cpu_s": statistics.median(
+            r["malicious_cpu_s_alice"] + r["malicious_cpu_s_bob"] for r in results
+        ),
     }
 
 
@@ -81,9 +128,9 @@ def bench_paper(
     pair_results, first_results = [], []
     for number, case in enumerate(cases, start=1):
         _say(progress, f"pair {number}/{len(cases)}")
-        pair_results.append(run_case(case, party))
+        pair_results.append(_run(case, party))
         if party.setup is not None:  # and as the first contact of two drones: a fresh setup
-            first_results.append(run_case(case, dataclasses.replace(party, setup=None, setups={})))
+            first_results.append(_run(case, dataclasses.replace(party, setup=None, setups={})))
     expected_any: dict[int, bool] = {}
     csv_path = data / "testroutine.csv"
     if csv_path.exists():
@@ -105,7 +152,7 @@ def bench_paper(
     for k, case in route_cases:
         _say(progress, f"route {k}")
         fixed = Case(case.alice, case.bob, GridSpec(GridKind.PLANE, span))
-        result = run_case(fixed, party)
+        result = _run(fixed, party)
         result["route"] = k
         result["segments"] = (len(case.alice) - 1, len(case.bob) - 1)
         result["hit_indices"] = [i for i, h in enumerate(result["hits"]) if h]
@@ -159,6 +206,10 @@ def format_paper(result: dict[str, Any]) -> str:
         f"| median bytes per pair, total{total_note} | {s['median_bytes_total']:.0f} "
         f"| 86 800 + 20.2 MB key | 4634 (object sizes) |",
         *first_rows,
+        f"| of which against a deviating peer (the OT consistency check, or Bob's key "
+        f"proof), median bytes and CPU per pair | {s['median_malicious_bytes']:.0f} B "
+        f"({100 * s['median_malicious_bytes'] / s['median_bytes_total']:.1f} %), "
+        f"{s['median_malicious_cpu_s'] * 1e3:.1f} ms | - | - |",
         f"| messages | {s['messages']:.0f} | about 96 | - |",
         "| security | 112-bit, nothing leaked | 80-bit DGK, leaks every bit | - |",
         "",
@@ -209,7 +260,7 @@ def bench_scaling(
         for k in range(repeat):
             _say(progress, f"{size} x {size} ({k + 1}/{repeat})")
             case = Case(random_path(size, range_), random_path(size, range_), grid)
-            results.append(run_case(case, party))
+            results.append(_run(case, party))
         r = results[-1]
         pairs = size * size
         total = r["bytes_alice_to_bob"] + r["bytes_bob_to_alice"]
@@ -227,6 +278,10 @@ def bench_scaling(
                 "messages": r["messages"],
                 "cpu_s_alice": statistics.median(x["cpu_s_alice"] for x in results),
                 "cpu_s_bob": statistics.median(x["cpu_s_bob"] for x in results),
+                "malicious_bytes": r["malicious_bytes"],
+                "malicious_cpu_s": statistics.median(
+                    x["malicious_cpu_s_alice"] + x["malicious_cpu_s_bob"] for x in results
+                ),
             }
         )
     return {"suite": suite, "params": params_of(party, grid), "rows": rows}
@@ -241,14 +296,16 @@ def format_scaling(result: dict[str, Any]) -> str:
         "the median of the runs.",
         "",
         "| n = m | pairs | correct | total bytes | bytes per pair | first contact bytes "
-        "| messages | Alice CPU s | Bob CPU s |",
-        "|---:|---:|---|---:|---:|---:|---:|---:|---:|",
+        "| messages | Alice CPU s | Bob CPU s | against a deviating peer: bytes, CPU ms |",
+        "|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in result["rows"]:
+        share = 100 * r["malicious_bytes"] / r["bytes_total"]
         lines.append(
             f"| {r['segments']} | {r['pairs']} | {r['correct']}/{r['runs']} "
             f"| {r['bytes_total']} | {r['bytes_per_pair']:.0f} | {r['bytes_first_contact']} "
-            f"| {r['messages']} | {r['cpu_s_alice']:.2f} | {r['cpu_s_bob']:.2f} |"
+            f"| {r['messages']} | {r['cpu_s_alice']:.2f} | {r['cpu_s_bob']:.2f} "
+            f"| {r['malicious_bytes']} ({share:.1f} %), {r['malicious_cpu_s'] * 1e3:.1f} |"
         )
     return "\n".join(lines)
 

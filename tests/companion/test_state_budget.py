@@ -55,3 +55,35 @@ def test_a_run_given_back_frees_its_place(tmp_path: Path) -> None:
     ledger.admit(b"drone-a", b"op-x", 4, 20.0, BOB)
     with pytest.raises(BudgetExceeded):
         ledger.admit(b"drone-a", b"op-x", 4, 21.0, BOB)
+
+
+def test_answer_bits_per_drone_bound_what_one_drone_learns(tmp_path: Path) -> None:
+    """D6: a deviating Alice can make each of her m output bits a predicate of her choice, so
+    the budget also counts answer bits (m per run): runs of 8 segments fit many times over,
+    one of 256 fits once and then nothing more that hour, whatever runs are left."""
+    limits = RunLimits(per_drone=8, total=64, window_s=3600, bits_per_drone=256)
+    ledger = RunLedger(StateStore(tmp_path), limits)
+    ledger.admit(b"honest", b"op", 24, 0.0, BOB, bits=8)
+    ledger.admit(b"honest", b"op", 24, 1.0, BOB, bits=32)
+    ledger.admit(b"greedy", b"op", 24, 2.0, BOB, bits=256)
+    with pytest.raises(BudgetExceeded) as info:
+        ledger.admit(b"greedy", b"op", 24, 3.0, BOB, bits=2)
+    assert info.value.scope is Scope.DRONE_BITS and "bits" in str(info.value)
+    ledger.admit(b"greedy", b"op", 24, 3603.0, BOB, bits=2)  # the window slid on
+    with pytest.raises(BudgetExceeded) as info:  # 40 + 256 > 256
+        ledger.admit(b"honest", b"op", 24, 4.0, BOB, bits=256)
+    assert info.value.scope is Scope.DRONE_BITS
+
+
+def test_a_state_directory_from_before_the_bit_budget_is_upgraded(tmp_path: Path) -> None:
+    import sqlite3
+
+    db = sqlite3.connect(tmp_path / StateStore.FILE)
+    db.execute("CREATE TABLE runs (t REAL, drone BLOB, operator BLOB, role TEXT)")
+    db.execute("INSERT INTO runs VALUES (1.0, ?, ?, ?)", (b"d", b"o", str(BOB)))
+    db.commit()
+    db.close()
+    store = StateStore(tmp_path)
+    assert store.count_runs(0.0, BOB) == 1 and store.count_runs(0.0, BOB, bits=True) == 0
+    store.record_run(2.0, b"d", b"o", BOB, bits=16)
+    assert store.count_runs(0.0, BOB, drone=b"d", bits=True) == 16
