@@ -118,3 +118,39 @@ def test_a_bob_whose_ot_extension_fails_the_check_loses_the_setup(
     assert len(deviated) == 3
     assert w.events(1, "result") and w.autopilots[1].uploads  # then the honest run's answer
     assert len(setup_ids) == len(set(setup_ids)) == 4  # a fresh setup after each failed check
+
+
+def test_a_deviating_alice_gets_no_more_answer_bits_than_the_budget(
+    tmp_path: Path, monkeypatch: Any
+) -> None:
+    """D6 (bounded): whatever a deviating Alice computes with her m output bits, Bob counts
+    them.  With 16 answer bits per drone and hour, a rogue drone's runs of 8 segments get two
+    answers, and the third request is refused (signed, BUDGET) before Bob builds anything."""
+    built = count_bobs(monkeypatch)
+    here = (474_011_000, 85_455_940)
+
+    async def main() -> tuple[World, list[Any]]:
+        w = await world(
+            tmp_path,
+            missions={2: "inspection_north.plan"},
+            extra={9: "fleet"},
+            settings={"max_answer_bits_per_peer": 16},
+        )
+        rogue = await w.rogue(9)
+        await rogue.announce(w, here, size_class=3)
+        path = tuple((10 * k, 10 * (k % 2)) for k in range(9))  # 8 segments
+        outcomes: list[Any] = []
+        for _ in range(3):
+            grid = GridSpec.geo(*here, radius_m=2000)
+            try:
+                outcomes.append(await rogue.compare(w, 2, path, grid))
+            except PeerRefused as exc:
+                outcomes.append(exc)
+        await w.stop()
+        return w, outcomes
+
+    w, (first, second, third) = run_simulated(main())
+    assert not isinstance(first, Exception) and not isinstance(second, Exception)
+    assert isinstance(third, PeerRefused) and third.code is Refusal.BUDGET
+    assert len(built) == 2
+    assert [e["reason"] for e in w.events(2, "refused")] == ["BUDGET"]
