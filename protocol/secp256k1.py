@@ -3,8 +3,9 @@
 coincurve's ``PublicKey`` cannot hold the point at infinity, which homomorphic arithmetic can
 reach (E(0) with zero randomness, or P + (-P)); here ``None`` stands for it.  Scalar
 multiplication uses libsecp256k1's constant-time ``tweak_mul``.  Decoding accepts only the
-33-byte compressed form of a point on the curve; secp256k1 has cofactor 1, so on the curve means
-in the group.
+33-byte compressed form of a point on the curve, or its x alone for a point with an even y
+(32 bytes, as BIP 340 encodes keys); secp256k1 has cofactor 1, so on the curve means in the
+group.
 """
 
 from __future__ import annotations
@@ -94,6 +95,28 @@ def decode(data: bytes) -> PublicKey:
         return PublicKey(bytes(data))
     except (ValueError, TypeError) as exc:
         raise RemoteProtocolError("point is not on secp256k1") from exc
+
+
+X_SIZE = 32  # a point with an even y, by its x alone (as BIP 340 encodes public keys)
+
+
+def has_even_y(p: Point) -> bool:
+    return p is not None and p.format(compressed=True)[0] == 2
+
+
+def encode_x(p: Point) -> bytes:
+    """32-byte x of a point whose y is even (the sender picks such points: a byte saved on
+    every point of the OT setup, 113 bytes of a first contact)."""
+    if not has_even_y(p):
+        raise LocalProtocolError("only a point with an even y has an x-only encoding")
+    return encode(p)[1:]
+
+
+def decode_x(data: bytes) -> PublicKey:
+    """The point with even y and this x; anything not on the curve is the sender's fault."""
+    if len(data) != X_SIZE:
+        raise RemoteProtocolError("not a 32-byte x-only secp256k1 point")
+    return decode(b"\x02" + bytes(data))
 
 
 def hash_to_point(domain: bytes, data: bytes) -> PublicKey:

@@ -8,8 +8,8 @@ point is Delta_b.  kappa base OTs (one per bit of Delta, :mod:`.base`) carry the
 
 Messages (both ride on the path protocol's first two messages, so a setup costs no round trip):
 
-* holder -> chooser: the base-OT receiver points, 33 bytes x kappa;
-* chooser -> holder: A (33 bytes), then the level corrections of every tree (32 bytes per level
+* holder -> chooser: the base-OT receiver points, 32 bytes (x only) x kappa;
+* chooser -> holder: A (32 bytes), then the level corrections of every tree (32 bytes per level
   below the first).
 
 Both ends name the result by ``setup_id`` = BLAKE2b(A || points), 16 bytes, and keep it for the
@@ -68,11 +68,11 @@ def describe(blocks: Sequence[int]) -> str:
 
 
 def holder_message_size(security: int = DEFAULT_SECURITY) -> int:
-    return security * ec.POINT_SIZE
+    return security * ec.X_SIZE
 
 
 def chooser_message_size(blocks: Sequence[int]) -> int:
-    return ec.POINT_SIZE + sum(correction_size(k) for k in blocks)
+    return ec.X_SIZE + sum(correction_size(k) for k in blocks)
 
 
 def _setup_id(a_point: bytes, points: bytes) -> bytes:
@@ -120,7 +120,7 @@ class HolderSetupStart:
     def finish(self, reply: bytes) -> HolderSetup:
         """Read the chooser's A and corrections; the holder's trees."""
         reader = Reader(reply)
-        a_point = reader.take(ec.POINT_SIZE)
+        a_point = reader.take(ec.X_SIZE)
         keys = self._receiver.keys(a_point)
         leaves = []
         used = 0

@@ -188,7 +188,7 @@ def test_limits() -> None:
 @pytest.mark.parametrize("kappa", [112, 128])
 def test_cached_setup_is_reused_and_unknown_setups_are_refused(ot_pair: Any, kappa: int) -> None:
     fresh = Alice(((0, 0), (1, 1)), GRID, ot_security=kappa)
-    assert len(fresh.start()) > 33 * kappa  # kappa base-OT points
+    assert len(fresh.start()) > 32 * kappa  # kappa base-OT points
     fresh = Alice(((0, 0), (1, 1)), GRID, ot_security=kappa)
     bob_setups: dict[bytes, Any] = {}
     run_paths(fresh, Bob(((0, 1), (1, 0)), setups=bob_setups))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from protocol import secp256k1 as ec
 from protocol.errors import LocalProtocolError, RemoteProtocolError
 from protocol.ot.base import BaseReceiver, BaseSender, message_size
 
@@ -21,11 +22,13 @@ def test_receiver_gets_the_chosen_key_only() -> None:
 
 
 def test_points_look_the_same_for_either_choice() -> None:
-    """The receiver's points are valid, distinct curve points whatever the choice."""
+    """The receiver's points are valid, distinct curve points (x only, even y) whatever the
+    choice."""
     zeros, ones = BaseReceiver([0] * 8).message(), BaseReceiver([1] * 8).message()
     for message in (zeros, ones):
-        points = {message[i * 33 : (i + 1) * 33] for i in range(8)}
-        assert len(points) == 8 and all(p[0] in (2, 3) for p in points)
+        assert len(message) == 8 * ec.X_SIZE
+        points = {message[i * 32 : (i + 1) * 32] for i in range(8)}
+        assert len(points) == 8 and all(ec.has_even_y(ec.decode_x(p)) for p in points)
 
 
 def test_strict_decoding() -> None:
@@ -34,11 +37,23 @@ def test_strict_decoding() -> None:
         BaseSender(receiver.message()[:-1], 2)
     with pytest.raises(RemoteProtocolError):
         BaseSender(receiver.message() + b"\x00", 2)
-    bad = bytearray(receiver.message())
-    bad[0] = 4
+    bad = b"\xff" * 32 + receiver.message()[32:]  # x above the field's prime
     with pytest.raises(RemoteProtocolError):
-        BaseSender(bytes(bad), 2)
+        BaseSender(bad, 2)
+    off_curve = next(  # an x with no y: about every other one
+        x for x in (k.to_bytes(32, "big") for k in range(1, 100)) if not _on_curve(x)
+    )
+    with pytest.raises(RemoteProtocolError):
+        BaseSender(off_curve + receiver.message()[32:], 2)
     with pytest.raises(RemoteProtocolError):
         receiver.keys(b"\x02" + b"\xff" * 32)  # x not on the curve
     with pytest.raises(LocalProtocolError):
         BaseReceiver([2])
+
+
+def _on_curve(x: bytes) -> bool:
+    try:
+        ec.decode_x(x)
+    except RemoteProtocolError:
+        return False
+    return True

@@ -144,7 +144,7 @@ def test_a_corrupt_setup_never_yields_inconsistent_keys() -> None:
         start = HolderSetupStart()
         chooser, reply = chooser_setup(start.message(), start.blocks)
         corrupt = bytearray(reply)
-        corrupt[33 + 16 * secrets.randbelow(4)] ^= 0x01  # a level pad of the first tree
+        corrupt[32 + 16 * secrets.randbelow(4)] ^= 0x01  # a level pad of the first tree
         holder = start.finish(bytes(corrupt))
         nonce = secrets.token_bytes(32)
         message, bob = chooser_extend(chooser, nonce, 32)
