@@ -9,7 +9,8 @@ With I/O: :mod:`.endpoint` (asyncio driver), :mod:`.medium` (simulated channel),
 from .airtime import PROFILES, LinkProfile, profile
 from .arq import LinkError, LinkTimeout, MessageTooLarge, PeerAborted
 from .clock import Clock, SimulationStalled, VirtualTimeLoop, run_simulated
-from .endpoint import LinkConfig, LinkEndpoint
+from .config import LinkConfig
+from .endpoint import LinkEndpoint
 from .frames import AbortCode
 from .medium import Channel, Impairments, SimMedium
 from .stats import LinkStats

@@ -14,7 +14,6 @@ import logging
 import math
 import random
 import secrets
-from dataclasses import dataclass, field
 
 from ..tasks import spawn
 from .airtime import DutyCycle, LinkProfile
@@ -28,6 +27,7 @@ from .arq import (
 )
 from .beacon_frames import BeaconParts, beacon_frames
 from .clock import Clock
+from .config import LinkConfig, Session
 from .frames import (
     BROADCAST,
     MAX_ACK_BITMAP,
@@ -47,40 +47,6 @@ from .transmitter import Transmitter
 
 log = logging.getLogger("companion.link")
 _JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
-
-
-@dataclass(frozen=True, slots=True)
-class LinkConfig:
-    """Tunables of the link; defaults suit every profile."""
-
-    max_message: int = 1 << 20
-    window: int = 64
-    max_tries: int = 24
-    max_polls: int = 20
-    max_partial: int = 8
-    max_sessions: int = 32
-    control_reserve: float = 0.1
-    latency_allowance_s: float = 0.05
-    idle_timeout_s: float | None = None  # None: derived from the profile
-
-    def idle_timeout(self, profile: LinkProfile) -> float:
-        """How long silence from a peer is tolerated.  On a duty-cycled link a peer that spent
-        its budget is silent for up to a window, and lost frames stretch that: three windows."""
-        if self.idle_timeout_s is not None:
-            return self.idle_timeout_s
-        return 3 * profile.duty_window_s + 600.0 if profile.duty_cycle else 300.0
-
-
-@dataclass
-class _Session:
-    peer: int
-    session: int
-    last_heard: float
-    inbox: asyncio.Queue[bytes | LinkError] = field(default_factory=asyncio.Queue)
-    send_lock: asyncio.Lock = field(default_factory=asyncio.Lock)
-    next_seq: int = 0
-    aborted: PeerAborted | None = None
-    arrived: float = 0.0  # accepted sessions: when the first fragment of the first message came
 
 
 class LinkEndpoint:
@@ -116,7 +82,7 @@ class LinkEndpoint:
         self.duty = DutyCycle(profile.budget_s, profile.duty_window_s, self.config.control_reserve)
         self.beacons: asyncio.Queue[tuple[int, bytes]] = asyncio.Queue(maxsize=64)
         self.radio = Transmitter(transport, profile, self.duty, self.stats, self.clock)
-        self._sessions: dict[tuple[int, int], _Session] = {}
+        self._sessions: dict[tuple[int, int], Session] = {}
         self._closed: dict[tuple[int, int], float] = {}
         self._aborted: dict[tuple[int, int], Frame] = {}
         self._accept: asyncio.Queue[tuple[int, int] | LinkError] = asyncio.Queue()
@@ -171,7 +137,7 @@ class LinkEndpoint:
             session = secrets.randbelow(0xFFFF) + 1
         self._closed.pop((peer, session), None)
         self._aborted.pop((peer, session), None)
-        self._sessions[(peer, session)] = _Session(peer, session, self.clock.now())
+        self._sessions[(peer, session)] = Session(peer, session, self.clock.now())
         return session
 
     async def accept(self, timeout: float | None = None) -> tuple[int, int]:
@@ -213,7 +179,7 @@ class LinkEndpoint:
             or self.clock.now() - self._last_traffic < quiet_s
         )
 
-    def _session(self, peer: int, session: int) -> _Session:
+    def _session(self, peer: int, session: int) -> Session:
         try:
             return self._sessions[(peer, session)]
         except KeyError:
@@ -268,7 +234,7 @@ class LinkEndpoint:
             )
 
     async def _await_ack(
-        self, out: Outgoing, acked: asyncio.Event, sess: _Session, sent_at: float, sample: bool
+        self, out: Outgoing, acked: asyncio.Event, sess: Session, sent_at: float, sample: bool
     ) -> None:
         timer = self._timer(sess.peer)
         while True:
@@ -325,7 +291,7 @@ class LinkEndpoint:
         for sent in done:
             await sent
 
-    def _raise_if_aborted(self, sess: _Session) -> None:
+    def _raise_if_aborted(self, sess: Session) -> None:
         if self.radio.error is not None:
             raise self.radio.error
         if sess.aborted is not None:
@@ -425,7 +391,7 @@ class LinkEndpoint:
             if len(self._sessions) >= self.config.max_sessions:
                 self.stats.drop("too_many_sessions")
                 return
-            sess = self._sessions[key] = _Session(
+            sess = self._sessions[key] = Session(
                 message.src, message.session, now, arrived=message.started
             )
             self._accept.put_nowait(key)
