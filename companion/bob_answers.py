@@ -103,6 +103,7 @@ class BobAnswers(CompanionCore):
             peer=peer,
             bytes=report.bytes_sent,
             auth_bytes=report.auth_bytes_sent,
+            guard_bytes=bob.guard_bytes,
         )
 
     async def _admit(

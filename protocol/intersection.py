@@ -153,6 +153,8 @@ class Machine:
 class AliceSide(Machine):
     """What every suite's Alice offers."""
 
+    guard_bytes: int = 0  # of the run's bytes, those against a deviating Bob (after message 2)
+
     m: int  # padded size
     segments: int  # real size
     n: int | None = None  # Bob's padded size, once his first reply has told it
@@ -173,6 +175,7 @@ class BobSide(Machine):
     """What every suite's Bob offers; created from Alice's hello."""
 
     n: int
+    guard_bytes: int = 0  # of his bytes, those that protect Alice against a deviating Bob
 
     def first_reply(self) -> bytes:
         raise NotImplementedError
@@ -298,6 +301,13 @@ class Alice:
         return self._impl.n
 
     @property
+    def guard_bytes(self) -> int:
+        """How many of the run's bytes protect Alice against a deviating Bob: the OT
+        consistency check (compact suite), Bob's Paillier key proof (paper suite).  Known
+        once Bob's first reply arrived."""
+        return self._impl.guard_bytes
+
+    @property
     def peer_keys(self) -> bytes:
         """Bob's public keys as his first reply carried them (:meth:`BobKeys.public_bytes`;
         empty for the compact suite, which has none): for checking against his beacon."""
@@ -348,6 +358,12 @@ class Bob:
         if self._impl is None:
             raise LocalProtocolError("n is known after the hello")
         return self._impl.n
+
+    @property
+    def guard_bytes(self) -> int:
+        """How many of Bob's bytes protect Alice against a deviating Bob (as
+        :attr:`Alice.guard_bytes`); 0 before the hello."""
+        return 0 if self._impl is None else self._impl.guard_bytes
 
     def receive(self, data: bytes) -> bytes | None:
         if self._impl is not None:

@@ -210,7 +210,9 @@ class PaperAlice(AliceSide):
         self.paillier = PaillierPublicKey.from_bytes(paillier_key, insecure_for_tests=self.insecure)
         self.dgk = read_dgk_key(take_blob(reader), self.insecure)
         self.peer_keys = body[start : reader.offset]  # as BobKeys.public_bytes() wrote them
-        keyproof.verify(self.paillier, take_blob(reader))  # before any of Bob's ciphertexts
+        proof = take_blob(reader)
+        keyproof.verify(self.paillier, proof)  # before any of Bob's ciphertexts
+        self.guard_bytes = 2 + len(proof)
         if 3 * self.l + 3 >= self.dgk.plaintext_modulus:
             raise RemoteProtocolError("peer's DGK plaintext space is too small")
         self.w = slot_bits(self.l, self.kappa)
@@ -330,6 +332,7 @@ class PaperBob(BobSide):
                 value = sum(v << (self.w * s) for s, v in enumerate(chunk))
                 cts.append(pub.encrypt(value).to_bytes())
         proof = put_blob(keys.paillier_proof)
+        self.guard_bytes = len(proof)
         body = n.to_bytes(2, "big") + keys.public_bytes() + proof + b"".join(cts)
         self._reply = frame(MsgType.KEYS, 2, body)
         self.state = State.RUNNING

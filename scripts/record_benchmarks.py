@@ -51,11 +51,13 @@ def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
         "(simulated seconds from the start); closest approach of each conflicting pair without "
         "and with the companion (t: when, with it).  Authentication: the bytes it added to the "
         "runs (key exchange, tags) and to the beacons (beyond unauthenticated 24-byte beacons: "
-        "tags, signed and certificate beacons), and their share of the rest of the radio bytes.",
+        "tags, signed and certificate beacons), and their share of the rest of the radio bytes.  "
+        "Against deviating peers: the bytes of the OT consistency checks (or the paper suite's "
+        "key proofs) in the answers, and their share of the rest.",
         "",
         "| scenario | link | conflicts resolved | precautionary | radio bytes | authentication "
-        "| airtime | first result | closest without -> with |",
-        "|---|---|---:|---:|---:|---:|---:|---|---|",
+        "| against deviating peers | airtime | first result | closest without -> with |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---|---|",
     ]
     paths = [SCENARIOS / f"{n}.toml" for n in names] or sorted(SCENARIOS.glob("*.toml"))
     for path in paths:
@@ -81,10 +83,12 @@ def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
         link = r["link"]
         total = sum(d["bytes_sent"] for d in r["drones"])
         auth = sum(d["auth"]["run_bytes"] + d["auth"]["beacon_added_bytes"] for d in r["drones"])
+        guard = sum(d.get("guard_bytes", 0) for d in r["drones"])
         lines.append(
             f"| {r['scenario']} | {link['profile']}, {link['loss']:.0%} loss "
             f"| {r['conflicts_resolved']}/{r['conflicts']} | {r['precautionary_actions']} "
             f"| {total} | {auth} (+{auth / (total - auth):.1%}) "
+            f"| {guard} (+{guard / (total - guard):.1%}) "
             f"| {sum(d['airtime_s'] for d in r['drones']):.1f} s "
             f"| {f'{min(results):.0f} s' if results else '-'} "
             f"| {'; '.join(meets) or '-'} |"

@@ -159,6 +159,9 @@ def build_report(
                     beacons=dict(c.beacons_sent),
                     beacon_added_bytes=c.beacon_bytes - UNAUTHENTICATED_SIZE * position_beacons,
                 ),
+                guard_bytes=sum(
+                    e.detail.get("guard_bytes", 0) for e in c.events if e.kind is K.ANSWERED
+                ),
                 untrusted_heard=[e.detail["drone"] for e in c.events if e.kind is K.UNTRUSTED],
                 beacons_rejected=dict(c.rejected),
                 max_altitude_m_amsl=round(

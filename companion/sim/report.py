@@ -70,6 +70,7 @@ class DroneReport:
     beacons_rejected: dict[str, int]
     max_altitude_m_amsl: float
     vehicle_holds: str  # "original", "edited" or "other"
+    guard_bytes: int = 0  # of its answers' bytes: checks against a deviating peer
 
 
 @dataclass(frozen=True)
@@ -193,7 +194,8 @@ def _drone_line(d: DroneReport, offset_m: float) -> str:
         f"  drone {d.id} ({VEHICLE_NAMES[d.vehicle, d.autopilot]}, "
         f"{d.operator}): {what}; radio {d.bytes_sent} B in {d.frames_sent} frames, "
         f"{d.airtime_s:.1f} s airtime (authentication adds {d.auth.run_bytes} B to "
-        f"runs, {d.auth.beacon_added_bytes} B to beacons)"
+        f"runs, {d.auth.beacon_added_bytes} B to beacons; the checks against a deviating "
+        f"peer {d.guard_bytes} B)"
     )
 
 

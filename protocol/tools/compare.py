@@ -16,11 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .. import keyproof
 from ..geometry import Point, path_hits
 from ..grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
 from ..intersection import Alice, Bob, BobKeys, Limits
-from ..ot import check
 from ..ot.setup import (
     DEFAULT_BLOCK_BITS,
     DEFAULT_SECURITY,
@@ -167,20 +165,11 @@ class Party:
         return cls(suite, None, setup, {chooser.setup_id: chooser}, once)
 
 
-def malicious_bytes(alice: Alice) -> int:
-    """The bytes of a finished run that protect it against a deviating peer: the OT
-    consistency check (compact suite), Bob's Paillier key proof (paper suite)."""
-    impl: Any = alice._impl  # a tool reads the run's public plan
-    if alice.suite is Suite.COMPACT:
-        return check.added_bytes(impl.setup.blocks, impl.plan.total_rots)
-    return 2 + keyproof.proof_size(impl.paillier)
-
-
 def run_case(case: Case, party: Party, limits: Limits | None = None) -> dict[str, Any]:
     alice, bob = case.machines(party, limits)
     t = run_paths(alice, bob)
     return {
-        "malicious_bytes": malicious_bytes(alice),
+        "malicious_bytes": alice.guard_bytes,
         "hits": alice.hits,
         "plain_hits": path_hits(case.alice, case.bob_on_grid),
         "bytes_alice_to_bob": t.bytes_alice_to_bob,
