@@ -13,7 +13,7 @@ both derive from N by hashing (Fiat-Shamir).  If a prime p divides N and phi(N),
 1/p share of Z_N^* are N-th residues; the decoder already refuses a modulus with a factor
 below 2^16 (:func:`protocol.primes.has_small_factor`), so p > 2^16 and ``ROOTS`` = 7 roots
 leave a bad modulus a chance below 2^-112 (the project's level).  1792 bytes for a 2048-bit N,
-made once per key by Bob; Alice checks a key once (7 exponentiations, about 20 ms) and
+made once per key by Bob; Alice checks a key once (7 exponentiations, 17 ms here) and
 remembers it (:func:`verify` caches by the key and the proof).
 """
 
