@@ -157,3 +157,26 @@ def test_a_corrupt_setup_never_yields_inconsistent_keys() -> None:
         for c, key, a0, a1 in zip(bob.choices, bob.keys, alice.keys0, alice.keys1, strict=True):
             assert key == (a0, a1)[c]
     assert refused >= 4 and accepted >= 4  # about half each: it depends on one bit of Delta
+
+
+def test_a_choice_changed_in_every_block_but_the_first_is_caught() -> None:
+    """Bob flips OT 0 in every correction row and answers the check for the flipped choice
+    bit: blocks 1.. now agree on c_0 xor 1, block 0 (whose u_0 *is* c) does not, so Alice's
+    row carries Delta_0 and the check fails unless he guessed Delta_0 (12 bits)."""
+    chooser, holder = _pair()
+    count, kappa = 64, 112
+    total = count + check.extra_ots(kappa)
+    nonce = secrets.token_bytes(32)
+    columns, choice, sums = _bob_state(chooser, nonce, total)
+    rows = [(u ^ choice).copy() for u in sums[1:]]
+    for row in rows:
+        row[0] ^= 1
+    body = b"".join(r.tobytes() for r in rows)
+    flipped = choice.copy()
+    flipped[0] ^= 1
+    reply = check.respond(columns, flipped, nonce, body, total)
+    with pytest.raises(ConsistencyError):
+        holder_extend(holder, nonce, count, body + reply)
+    honest = check.respond(columns, choice, nonce, body, total)  # nor with the old choice
+    with pytest.raises(ConsistencyError):
+        holder_extend(holder, nonce, count, body + honest)
