@@ -104,14 +104,6 @@ def has_even_y(p: Point) -> bool:
     return p is not None and p.format(compressed=True)[0] == 2
 
 
-def encode_x(p: Point) -> bytes:
-    """32-byte x of a point whose y is even (the sender picks such points: a byte saved on
-    every point of the OT setup, 113 bytes of a first contact)."""
-    if not has_even_y(p):
-        raise LocalProtocolError("only a point with an even y has an x-only encoding")
-    return encode(p)[1:]
-
-
 def decode_x(data: bytes) -> PublicKey:
     """The point with even y and this x; anything not on the curve is the sender's fault."""
     if len(data) != X_SIZE:

@@ -49,10 +49,10 @@ from .millionaire import (
     LeavesAlice,
     LeavesBob,
 )
-from .ot.check import added_bytes
 from .ot.extension import (
     ChooserRots,
     HolderRots,
+    check_bytes,
     chooser_extend,
     correction_size,
     holder_extend,
@@ -163,7 +163,7 @@ class CompactAlice(AliceSide):
         self.plan = plan = make_plan(self.m, self.n, self.grid, self.digit_bits)
         nonce = _run_nonce(self.nonce, bob_nonce, self.setup.setup_id)
         extension = reader.take(correction_size(self.setup.blocks, plan.total_rots))
-        self.guard_bytes = added_bytes(self.setup.blocks, plan.total_rots)
+        self.guard_bytes = check_bytes(self.setup.blocks, plan.total_rots)
         flips = reader.take(plan.products.correction_size())
         reader.finish()
         rots = holder_extend(self.setup, nonce, plan.total_rots, extension)
@@ -268,7 +268,7 @@ class CompactBob(BobSide):
         nonce_b = secrets.token_bytes(NONCE_SIZE)
         nonce = _run_nonce(hello.nonce, nonce_b, self.setup.setup_id)
         extension, rots = chooser_extend(self.setup, nonce, self.plan.total_rots)
-        self.guard_bytes = added_bytes(self.setup.blocks, self.plan.total_rots)
+        self.guard_bytes = check_bytes(self.setup.blocks, self.plan.total_rots)
         p, q, r = self.plan.slices()
         self._leaf_rots = ChooserRots(rots.choices[q], rots.keys[q])
         self._triple_rots = ChooserRots(rots.choices[r], rots.keys[r])

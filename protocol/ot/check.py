@@ -92,15 +92,6 @@ def reply_size(kappa: int) -> int:
     return 2 * field(kappa).size
 
 
-def added_bytes(blocks: Sequence[int], count: int) -> int:
-    """What the check adds to the extension message of ``count`` OTs: the extra OTs'
-    corrections and the reply (what malicious security costs a run on the radio)."""
-    kappa = sum(blocks)
-    rows = len(blocks) - 1
-    extra = rows * ((count + extra_ots(kappa) + 7) // 8 - (count + 7) // 8)
-    return extra + reply_size(kappa)
-
-
 def challenges(nonce: bytes, message: bytes, count: int, kappa: int) -> npt.NDArray[np.uint64]:
     """chi_0 .. chi_(count-1), each as (low 64 bits, high 64 bits): a random oracle on the run
     nonce and Bob's whole extension message, so he fixes the rows before he sees them."""

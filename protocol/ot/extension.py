@@ -47,6 +47,12 @@ def correction_size(blocks: Sequence[int], count: int) -> int:
     return (len(blocks) - 1) * ((total + 7) // 8) + check.reply_size(kappa)
 
 
+def check_bytes(blocks: Sequence[int], count: int) -> int:
+    """Of :func:`correction_size`, the bytes of the consistency check (its extra OTs'
+    corrections and its reply): what protection against a deviating Bob costs a run."""
+    return correction_size(blocks, count) - (len(blocks) - 1) * ((count + 7) // 8)
+
+
 def _expand(leaves: Sequence[bytes | None], nonce: bytes, nbytes: int) -> Bytes:
     zero = bytes(nbytes)
     raw = b"".join(zero if s is None else prg(s, nonce, nbytes) for s in leaves)
@@ -84,8 +90,9 @@ def _tweak(nonce: bytes, index: int) -> bytes:
 
 
 def _check(count: int, nonce: bytes) -> None:
-    if not 1 <= count <= MAX_OTS - check.extra_ots(128):
-        raise LocalProtocolError(f"{count} OTs outside 1..{MAX_OTS}")
+    most = MAX_OTS - check.extra_ots(128)  # room for the check's own OTs
+    if not 1 <= count <= most:
+        raise LocalProtocolError(f"{count} OTs outside 1..{most}")
     if len(nonce) < 16:
         raise LocalProtocolError("a run nonce has at least 16 bytes")
 
@@ -167,6 +174,7 @@ __all__ = [
     "KEY_SIZE",
     "ChooserRots",
     "HolderRots",
+    "check_bytes",
     "chooser_extend",
     "correction_size",
     "holder_extend",

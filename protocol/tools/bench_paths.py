@@ -75,12 +75,12 @@ class CheckCost:
 
 
 def _run(case: Case, party: Party) -> dict[str, Any]:
-    """One case through the loopback (:func:`run_case`), with the CPU the OT consistency
-    check took in it (its bytes are in ``run_case``'s ``malicious_bytes``)."""
+    """One case through the loopback (:func:`run_case`), with the CPU its protection against
+    a deviating Bob took (:class:`CheckCost`; the bytes are ``run_case``'s ``guard_bytes``)."""
     with CheckCost() as cost:
         result = run_case(case, party)
-    result["malicious_cpu_s_alice"] = cost.spent["alice"]
-    result["malicious_cpu_s_bob"] = cost.spent["bob"]
+    result["guard_cpu_s_alice"] = cost.spent["alice"]
+    result["guard_cpu_s_bob"] = cost.spent["bob"]
     return result
 
 
@@ -110,9 +110,9 @@ def _summary(results: list[dict[str, Any]], pairs: list[int]) -> dict[str, Any]:
         "median_bytes_bob_to_alice": ba,
         "median_bytes_total": statistics.median(x + y for _, _, x, y in per_pair),
         "messages": max(r["messages"] for r in results),
-        "median_malicious_bytes": statistics.median(r["malicious_bytes"] for r in results),
-        "median_malicious_cpu_s": statistics.median(
-            r["malicious_cpu_s_alice"] + r["malicious_cpu_s_bob"] for r in results
+        "median_guard_bytes": statistics.median(r["guard_bytes"] for r in results),
+        "median_guard_cpu_s": statistics.median(
+            r["guard_cpu_s_alice"] + r["guard_cpu_s_bob"] for r in results
         ),
     }
 
@@ -219,8 +219,8 @@ def format_paper(result: dict[str, Any]) -> str:
         f"| 86 800 + 20.2 MB key | 4634 (object sizes) |",
         *first_rows,
         f"| of which against a deviating peer ({what}), median bytes and CPU per pair "
-        f"| {s['median_malicious_bytes']:.0f} B (+{_over(s['median_malicious_bytes'], total)} "
-        f"on the run without it), {s['median_malicious_cpu_s'] * 1e3:.1f} ms | - | - |",
+        f"| {s['median_guard_bytes']:.0f} B (+{_over(s['median_guard_bytes'], total)} "
+        f"on the run without it), {s['median_guard_cpu_s'] * 1e3:.1f} ms | - | - |",
         f"| messages | {s['messages']:.0f} | about 96 | - |",
         "| security | 112-bit, nothing leaked | 80-bit DGK, leaks every bit | - |",
         "",
@@ -289,9 +289,9 @@ def bench_scaling(
                 "messages": r["messages"],
                 "cpu_s_alice": statistics.median(x["cpu_s_alice"] for x in results),
                 "cpu_s_bob": statistics.median(x["cpu_s_bob"] for x in results),
-                "malicious_bytes": r["malicious_bytes"],
-                "malicious_cpu_s": statistics.median(
-                    x["malicious_cpu_s_alice"] + x["malicious_cpu_s_bob"] for x in results
+                "guard_bytes": r["guard_bytes"],
+                "guard_cpu_s": statistics.median(
+                    x["guard_cpu_s_alice"] + x["guard_cpu_s_bob"] for x in results
                 ),
             }
         )
@@ -312,12 +312,12 @@ def format_scaling(result: dict[str, Any]) -> str:
         "|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in result["rows"]:
-        share = _over(r["malicious_bytes"], r["bytes_total"])
+        share = _over(r["guard_bytes"], r["bytes_total"])
         lines.append(
             f"| {r['segments']} | {r['pairs']} | {r['correct']}/{r['runs']} "
             f"| {r['bytes_total']} | {r['bytes_per_pair']:.0f} | {r['bytes_first_contact']} "
             f"| {r['messages']} | {r['cpu_s_alice']:.2f} | {r['cpu_s_bob']:.2f} "
-            f"| {r['malicious_bytes']} (+{share}), {r['malicious_cpu_s'] * 1e3:.1f} |"
+            f"| {r['guard_bytes']} (+{share}), {r['guard_cpu_s'] * 1e3:.1f} |"
         )
     return "\n".join(lines)
 

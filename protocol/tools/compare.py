@@ -169,7 +169,7 @@ def run_case(case: Case, party: Party, limits: Limits | None = None) -> dict[str
     alice, bob = case.machines(party, limits)
     t = run_paths(alice, bob)
     return {
-        "malicious_bytes": alice.guard_bytes,
+        "guard_bytes": alice.guard_bytes,
         "hits": alice.hits,
         "plain_hits": path_hits(case.alice, case.bob_on_grid),
         "bytes_alice_to_bob": t.bytes_alice_to_bob,

@@ -156,7 +156,9 @@ def test_a_corrupt_setup_never_yields_inconsistent_keys() -> None:
         accepted += 1
         for c, key, a0, a1 in zip(bob.choices, bob.keys, alice.keys0, alice.keys1, strict=True):
             assert key == (a0, a1)[c]
-    assert refused >= 4 and accepted >= 4  # about half each: it depends on one bit of Delta
+    # about half each (it depends on one bit of Delta); both at least once but with
+    # probability 2^-23
+    assert refused and accepted
 
 
 def test_a_choice_changed_in_every_block_but_the_first_is_caught() -> None:
