@@ -189,12 +189,18 @@ class BobAnswers(CompanionCore):
 
     def _plausible_box(self, hello: Hello, known: Peer) -> bool:
         """Alice's grid is centred where she is (her position when the run starts): within
-        what she can have flown since her last verified beacon.  Bob's path is cut to her
-        box, so a box elsewhere would let a deviating Alice probe where Bob flies far from
-        her.  The refusal depends on her request and her beacons only, not on Bob's path."""
+        what she can have flown since her last verified beacon; it reaches no further than
+        ``max_box_radius_m`` and is no finer than ``min_grid_resolution_mm``.  Bob's path is
+        cut to her box, so a box elsewhere -- or one centred on her that spans a continent --
+        would let a deviating Alice probe where Bob flies far from her.  The refusal depends
+        on her request, her beacons and Bob's limits only, not on Bob's path."""
         grid = hello.grid
         if grid.kind is not GridKind.GEO:
             return False  # a drone's run is on the globe
+        if grid.resolution_mm < self.settings.min_grid_resolution_mm:
+            return False
+        if grid.range * grid.resolution_mm > self.settings.max_box_radius_m * 1000:
+            return False
         age = max(self.clock.now() - known.heard_at, 0.0)
         reach = BOX_SLACK_M + MAX_SPEED_M_S * age
         return distance_m((grid.ref_lat_e7, grid.ref_lon_e7), known.position) <= reach

@@ -65,6 +65,8 @@ class CompanionSettings:
     initiation_range_m: float = 5000.0
     grid_resolution_mm: int = 500
     grid_radius_m: float = 500.0  # smallest comparison box; doubled until it holds Alice's path
+    max_box_radius_m: float = 64000.0  # largest box we answer in (as Bob): 40 m/s for 27 min
+    min_grid_resolution_mm: int = 100  # finest grid we answer on (as Bob)
     max_runs_per_peer: int = 8  # runs a certified drone may ask of us per window
     max_runs_total: int = 64  # runs all peers together may ask of us per window
     max_answer_bits_per_peer: int = 256  # answer bits (segments x runs) one drone may get

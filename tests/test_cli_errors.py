@@ -58,6 +58,9 @@ def files(tmp_path: Path) -> Path:
     identity = _identity(tmp_path, node=1)  # a config the companion would run with
     (tmp_path / "ident.toml").write_text("node = 1\n" + identity)
     (tmp_path / "badurl.toml").write_text('node = 1\nautopilot = "bogus://x"\n' + identity)
+    (tmp_path / "badgrid.toml").write_text(
+        "node = 1\n" + identity + "[limits]\nmin_grid_resolution_mm = 0\n"
+    )
     (tmp_path / "paths.txt").write_text("(0,0)(10,10)\n")
     (tmp_path / "adir").mkdir()
     return tmp_path
@@ -129,6 +132,12 @@ CASES: list[tuple[str, str, list[str], str]] = [
         C,
         ["run", "--config", "{d}/badurl.toml"],
         "badurl.toml: autopilot: bogus://x: not a MAVSDK connection URL",
+    ),
+    (
+        "run-grid-floor",
+        C,
+        ["run", "--config", "{d}/badgrid.toml"],
+        "\\[limits\\]: min_grid_resolution_mm: 0 is out of range",
     ),
     ("hub-port", C, ["link-hub", "--port", "99999"], "--port: 99999 is out of range"),
     ("hub-loss", C, ["link-hub", "--loss", "nan"], "--loss: 'nan' is not a finite number"),

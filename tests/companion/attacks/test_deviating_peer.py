@@ -43,24 +43,44 @@ def test_the_paper_suite_runs_only_with_operators_trusted_with_its_keys(tmp_path
     assert trusted.events(1, "result") and trusted.autopilots[1].uploads
 
 
-def test_a_box_away_from_alices_beacons_is_refused_before_any_work(
-    tmp_path: Path, monkeypatch: Any
+HERE = (474_011_000, 85_455_940)
+
+
+@pytest.mark.parametrize(
+    ("centre", "radius_m", "resolution_mm"),
+    [
+        ((474_461_000, 85_455_940), 2000.0, 500),  # 5 km north of her beacons
+        (HERE, 1_000_000.0, 1000),
+        (HERE, 128_000.0, 500),
+        (HERE, 2000.0, 50),
+        (HERE, 2000.0, 1),
+    ],
+    ids=["away", "continent", "twice-the-limit", "finer-than-the-floor", "millimetre"],
+)
+def test_a_box_away_too_large_or_too_fine_is_refused_before_any_work(
+    tmp_path: Path,
+    monkeypatch: Any,
+    centre: tuple[int, int],
+    radius_m: float,
+    resolution_mm: int,
 ) -> None:
-    """D6 (bounded): Bob's path is cut to Alice's box, so a deviating Alice who centres her
-    grid on somebody's delivery address, kilometres from where her signed beacons put her,
-    would probe where Bob flies there.  Bob refuses such a request (signed, BOX) before he
-    builds anything; the same request centred where she is gets its answer."""
+    """D7: Bob's path is cut to Alice's box, so a deviating Alice who centres her grid on
+    somebody's delivery address, kilometres from where her signed beacons put her, would
+    probe where Bob flies there -- and so would a box centred on her but a thousand
+    kilometres wide; a grid finer than Bob's floor places his vertices more precisely than he
+    agreed to.  Bob refuses each (signed, BOX) before he builds anything; a request centred
+    where she is and within his limits (64 km, 100 mm by default) gets its answer."""
     built = count_bobs(monkeypatch)
-    here = (474_011_000, 85_455_940)
-    away = (474_461_000, 85_455_940)  # 5 km north
 
     async def main() -> tuple[World, list[Any]]:
         w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
         rogue = await w.rogue(9)
-        await rogue.announce(w, here, size_class=2)
+        await rogue.announce(w, HERE, size_class=2)
         outcomes: list[Any] = []
-        for centre in (away, here):
-            grid = GridSpec.geo(*centre, radius_m=2000)
+        for grid in (
+            GridSpec.geo(*centre, radius_m=radius_m, resolution_mm=resolution_mm),
+            GridSpec.geo(*HERE, radius_m=64_000.0, resolution_mm=100),  # at both limits
+        ):
             try:
                 outcomes.append(await rogue.compare(w, 2, ((0, 0), (10, 0), (10, 10)), grid))
             except PeerRefused as exc:
@@ -68,9 +88,9 @@ def test_a_box_away_from_alices_beacons_is_refused_before_any_work(
         await w.stop()
         return w, outcomes
 
-    w, (far, near) = run_simulated(main())
-    assert isinstance(far, PeerRefused) and far.code is Refusal.BOX
-    assert not isinstance(near, Exception)  # the honest-looking request is answered
+    w, (probe, within) = run_simulated(main())
+    assert isinstance(probe, PeerRefused) and probe.code is Refusal.BOX
+    assert not isinstance(within, Exception)  # the honest-looking request is answered
     assert len(built) == 1  # Bob built his machine for the second request only
     assert [e["reason"] for e in w.events(2, "refused")] == ["BOX"]
 
