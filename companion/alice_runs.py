@@ -211,6 +211,7 @@ class AliceRuns(Edits):
                     setup=setup,
                     horizon_m=horizon,
                     ot_security=self.settings.ot_security,
+                    trusted_keys=neighbour.operator.paper_keys,
                 )
             except ProtocolError as exc:
                 self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=str(exc))

@@ -41,3 +41,8 @@ class ConsistencyError(RemoteProtocolError):
     """The peer's OT extension fails the consistency check (:mod:`protocol.ot.check`): it
     deviated from the protocol, or the OT setup is corrupt.  The run ends and the setup must be
     dropped: its Delta may have been probed."""
+
+
+class UntrustedKeysError(LocalProtocolError):
+    """The paper suite was asked to run with a peer whose keys nobody vouched for: Alice cannot
+    check the range of Bob's Paillier plaintexts nor his DGK key (docs/security.md, D3)."""

@@ -32,7 +32,12 @@ from dataclasses import dataclass, field
 
 from .circuit import Circuit
 from .dgk import DGKPrivateKey
-from .errors import InputRangeError, LocalProtocolError, ProtocolError, RemoteProtocolError
+from .errors import (
+    InputRangeError,
+    LocalProtocolError,
+    ProtocolError,
+    RemoteProtocolError,
+)
 from .geometry import BobPath, Point, fit_to_box
 from .grid import GridKind, GridSpec
 from .ot.setup import DEFAULT_BLOCK_BITS, DEFAULT_SECURITY, ChooserSetup, HolderSetup
@@ -229,6 +234,12 @@ class Alice:
 
     ``setup`` is the OT setup cached with this peer (compact suite), or None for a fresh one;
     after the run :attr:`setup` holds the setup to cache.
+
+    ``trusted_keys`` (paper suite only): the caller vouches for Bob's keys and software.  Alice
+    cannot check the range of Bob's Paillier plaintexts (out-of-range values put her
+    coefficients above the masked slots, where Bob reads them) nor his DGK key (a generator of
+    smooth order opens her blinded tests), so the paper suite refuses to start without it
+    (docs/security.md, D2 and D3).  The compact suite needs no such trust.
     """
 
     def __init__(
@@ -244,6 +255,7 @@ class Alice:
         digit_bits: int | None = None,
         block_bits: int = DEFAULT_BLOCK_BITS,
         ot_security: int = DEFAULT_SECURITY,
+        trusted_keys: bool = False,
         insecure_for_tests: bool = False,
     ) -> None:
         if len(path) < 2:
@@ -273,6 +285,7 @@ class Alice:
                 kappa=kappa,
                 limits=limits,
                 horizon_m=horizon_m,
+                trusted_keys=trusted_keys,
                 insecure_for_tests=insecure_for_tests,
             )
 

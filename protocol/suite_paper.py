@@ -40,7 +40,7 @@ from .comparison import (
 )
 from .dgk import DGKPublicKey
 from .encoding import Reader
-from .errors import LocalProtocolError, RemoteProtocolError
+from .errors import LocalProtocolError, RemoteProtocolError, UntrustedKeysError
 from .geometry import BobPath, Point, orient_coefficients, pad_path, projection_key
 from .grid import GridSpec
 from .hegates import HeGatesAlice, HeGatesBob
@@ -152,8 +152,14 @@ class PaperAlice(AliceSide):
         kappa: int,
         limits: Limits,
         horizon_m: int = 0,
+        trusted_keys: bool = False,
         insecure_for_tests: bool = False,
     ) -> None:
+        if not trusted_keys:  # D3 (docs/security.md): nothing of Alice's without the trust
+            raise UntrustedKeysError(
+                "the paper suite runs only with a peer trusted with its keys (trusted_keys=True):"
+                " Alice cannot check the range of Bob's ciphertexts nor his DGK key"
+            )
         check_kappa(kappa, insecure_for_tests)
         self.segments = len(path) - 1
         self.m = limits.padded(self.segments)

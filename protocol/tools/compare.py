@@ -51,7 +51,14 @@ class Case:
     def machines(self, party: Party, limits: Limits | None = None) -> tuple[Alice, Bob]:
         limits = limits or Limits()
         return (
-            Alice(self.alice, self.grid, suite=party.suite, setup=party.setup, limits=limits),
+            Alice(
+                self.alice,
+                self.grid,
+                suite=party.suite,
+                setup=party.setup,
+                limits=limits,
+                trusted_keys=True,  # both parties are this process's
+            ),
             Bob(
                 self.bob,
                 keys=party.bob_keys,

@@ -25,7 +25,12 @@ def machines(
 ) -> tuple[Alice, Bob]:
     limits = limits or Limits()
     alice = Alice(
-        alice_path, grid, suite=suite, setup=ot_pair.holder if ot_pair else None, limits=limits
+        alice_path,
+        grid,
+        suite=suite,
+        setup=ot_pair.holder if ot_pair else None,
+        limits=limits,
+        trusted_keys=True,
     )
     bob = Bob(
         bob_path,

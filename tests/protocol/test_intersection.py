@@ -225,7 +225,14 @@ def test_out_of_order_and_failed_states(ot_pair: Any) -> None:
 
 
 def test_bob_refuses_weak_kappa_and_oversized_paths(keys: Any, ot_pair: Any) -> None:
-    weak = Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER, kappa=20, insecure_for_tests=True)
+    weak = Alice(
+        ((0, 0), (1, 1)),
+        GRID,
+        suite=Suite.PAPER,
+        kappa=20,
+        trusted_keys=True,
+        insecure_for_tests=True,
+    )
     with pytest.raises(RemoteProtocolError, match="kappa"):
         Bob(((0, 1), (1, 0)), keys=keys.bob).receive(weak.start())
     long_path = tuple((i % 5, i % 7) for i in range(9))  # 8 segments
@@ -237,11 +244,13 @@ def test_bob_refuses_weak_kappa_and_oversized_paths(keys: Any, ot_pair: Any) -> 
 
 
 def test_suite_choice(keys: Any) -> None:
-    alice = Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER)
+    alice = Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER, trusted_keys=True)
     with pytest.raises(RemoteProtocolError, match="suite"):
         Bob(((0, 1), (1, 0)), suites=(Suite.COMPACT,)).receive(alice.start())
     with pytest.raises(LocalProtocolError, match="keys"):
-        Bob(((0, 1), (1, 0))).receive(Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER).start())
+        Bob(((0, 1), (1, 0))).receive(
+            Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER, trusted_keys=True).start()
+        )
     with pytest.raises(InputRangeError):
         Alice(((0, 0), (11, 0)), GridSpec(GridKind.PLANE, 10))
 
@@ -252,7 +261,7 @@ def test_oversized_peer_keys_are_refused(keys: Any) -> None:
 
     with pytest.raises(RemoteProtocolError, match="4096"):
         read_dgk_key(bytes([1]) * (3 * 1024 + 5), False)
-    alice = Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER)
+    alice = Alice(((0, 0), (1, 1)), GRID, suite=Suite.PAPER, trusted_keys=True)
     alice.start()
     big_n = (1 << 8191) | 1  # odd, 8192 bits
     body = (1).to_bytes(2, "big") + put_blob(big_n.to_bytes(1024, "big")) + put_blob(b"")

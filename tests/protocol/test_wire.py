@@ -117,7 +117,7 @@ class Recorder:
 
 def fresh(suite: Suite, keys: Any, ot_pair: Any) -> tuple[Alice, Bob]:
     return (
-        Alice(ALICE_PATH, GRID, suite=suite, setup=ot_pair.holder),
+        Alice(ALICE_PATH, GRID, suite=suite, setup=ot_pair.holder, trusted_keys=True),
         Bob(BOB_PATH, keys=keys.bob, setups=ot_pair.setups),
     )
 

@@ -1,9 +1,10 @@
 """A deviating Bob's keys (paper suite): a modulus with a factor he knows the order of lets
 what he decrypts depend on Alice's secrets (her masks multiplied into his ciphertexts).  The
 decoders refuse a modulus with a factor below 2^16 -- the cheap case, n = 3 * P; two large
-factors of a bad form need a proof of the modulus, which the paper suite does not carry: the
-companion runs it only with drones whose operator vouches for their keys
-(tests/companion/attacks/test_deviating_peer.py, docs/security.md)."""
+factors of a bad form are caught by the modulus proof in his KEYS message (D2).  His DGK key
+and the range of his ciphertexts carry no proof (D3): the paper suite starts only when the
+caller vouches for the peer (``trusted_keys``; the companion's ``paper_keys``,
+tests/companion/attacks/test_deviating_peer.py, docs/security.md)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import pytest
 from protocol import keyproof
 from protocol.dgk import DGKPublicKey
 from protocol.encoding import int_to_fixed
-from protocol.errors import RemoteProtocolError
+from protocol.errors import RemoteProtocolError, UntrustedKeysError
 from protocol.intersection import Alice, Bob, State
 from protocol.paillier import PaillierPublicKey
 from protocol.primes import has_small_factor, random_prime
@@ -111,7 +112,7 @@ def test_a_modulus_with_gcd_n_phi_not_one_cannot_prove_itself() -> None:
 def test_alice_checks_the_proof_before_touching_bobs_ciphertexts(keys: Any) -> None:
     """A KEYS message whose proof does not check ends the run at Alice, before she computes
     anything on Bob's ciphertexts (nothing of hers goes back)."""
-    alice = Alice(((0, 0), (5, 5)), GRID, suite=Suite.PAPER)
+    alice = Alice(((0, 0), (5, 5)), GRID, suite=Suite.PAPER, trusted_keys=True)
     bob = Bob(((0, 5), (5, 0)), keys=keys.bob)
     reply = bob.receive(alice.start())
     assert reply is not None
@@ -121,3 +122,18 @@ def test_alice_checks_the_proof_before_touching_bobs_ciphertexts(keys: Any) -> N
     with pytest.raises(RemoteProtocolError, match="proof"):
         alice.receive(broken)
     assert alice.state is State.FAILED
+
+
+# --------------------------------------------------------------------------- D3: untrusted keys
+
+
+def test_the_paper_suite_does_not_start_without_trusted_keys(keys: Any) -> None:
+    """D3: Alice cannot check the range of Bob's Paillier plaintexts (2^1300 as a coordinate
+    puts her coefficients above the masked slots) nor his DGK key, so the sans-IO core itself
+    refuses the paper suite unless the caller vouches for the peer: no HELLO, no machine.  The
+    compact suite needs no such trust."""
+    with pytest.raises(UntrustedKeysError, match="trusted_keys"):
+        Alice(((0, 0), (5, 5)), GRID, suite=Suite.PAPER)
+    assert Alice(((0, 0), (5, 5)), GRID).state is State.START  # compact: no trust asked
+    trusted = Alice(((0, 0), (5, 5)), GRID, suite=Suite.PAPER, trusted_keys=True)
+    assert Bob(((0, 5), (5, 0)), keys=keys.bob).receive(trusted.start()) is not None
