@@ -270,8 +270,18 @@ class AliceRuns(Edits):
                     return False
                 if exc.code is Refusal.UNKNOWN_PEER:
                     self._cert_now.set()  # it lacks our certificate: beacon it
+                box: dict[str, float] = {}
+                if exc.code is Refusal.BOX:  # off our beacons, or beyond the peer's limits
+                    box = {
+                        "box_radius_m": grid.range * grid.resolution_mm / 1000,
+                        "resolution_mm": grid.resolution_mm,
+                    }
                 self.record(
-                    EventKind.RUN_FAILED, peer=peer.node, phase=phase, refused=exc.code.name
+                    EventKind.RUN_FAILED,
+                    peer=peer.node,
+                    phase=phase,
+                    refused=exc.code.name,
+                    **box,
                 )
                 return False
             except AuthenticationError as exc:

@@ -95,6 +95,25 @@ def test_a_box_away_too_large_or_too_fine_is_refused_before_any_work(
     assert [e["reason"] for e in w.events(2, "refused")] == ["BOX"]
 
 
+def test_an_honest_box_beyond_the_peers_limit_is_refused_and_said_so(tmp_path: Path) -> None:
+    """The other side of D7's limits: an honest drone whose path needs a larger box than its
+    peer answers in is refused (signed, BOX), never applies a result, and its failed run says
+    which box it asked for, so that an operator can see which limit to raise."""
+
+    async def main() -> World:
+        w = await world(tmp_path, settings={"max_box_radius_m": 400.0})  # below every box
+        await w.clock.sleep(1800)
+        await w.stop()
+        return w
+
+    w = run_simulated(main())
+    failed = [e for e in w.events(1, "run_failed") if e.get("refused") == "BOX"]
+    assert failed and all(e["box_radius_m"] >= 500 and e["resolution_mm"] == 500 for e in failed)
+    assert not w.events(1, "result") and not w.autopilots[1].uploads
+    assert "BOX" in {e["reason"] for e in w.events(2, "refused")}
+    assert not w.events(2, "answered")
+
+
 def test_a_bob_whose_ot_extension_fails_the_check_loses_the_setup(
     tmp_path: Path, monkeypatch: Any
 ) -> None:
