@@ -178,6 +178,7 @@ class BobAnswers(CompanionCore):
                 wall,
                 BOB,
                 bits=hello.m,
+                operator_bits=operator.max_answer_bits_per_hour,
             )
         except BudgetExceeded as exc:
             self.record(EventKind.BUDGET, peer=peer, error=str(exc))

@@ -26,13 +26,14 @@ class Scope(enum.Enum):
     OPERATOR = "operator"
     TOTAL = "total"
     DRONE_BITS = "drone answer-bit"  # what one drone may learn of us, whatever it computes
+    OPERATOR_BITS = "operator answer-bit"  # what all the drones of one operator may learn
 
 
 class BudgetExceeded(Exception):
     """No run now: ``scope`` says which limit is used up."""
 
     def __init__(self, scope: Scope, limit: int, window_s: float) -> None:
-        unit = "bits" if scope is Scope.DRONE_BITS else "runs"
+        unit = "bits" if scope in (Scope.DRONE_BITS, Scope.OPERATOR_BITS) else "runs"
         super().__init__(f"{scope.value} limit of {limit} {unit} per {window_s:.0f} s reached")
         self.scope = scope
 
@@ -64,11 +65,12 @@ class RunLedger:
         now: float,
         role: Role = BOB,
         bits: int = 0,
+        operator_bits: int | None = None,
     ) -> None:
         """Raise :class:`BudgetExceeded` if one more run in ``role`` with ``drone`` (of
-        ``operator``, whose drones may ask ``operator_limit`` runs per window together), one
-        that opens ``bits`` answer bits to it, is too many.  As Alice only the per-drone run
-        limit applies."""
+        ``operator``, whose drones may ask ``operator_limit`` runs and open ``operator_bits``
+        answer bits per window together), one that opens ``bits`` answer bits to it, is too
+        many.  As Alice only the per-drone run limit applies."""
         since = now - self.limits.window_s
         count = self.store.count_runs
         checks = [(Scope.DRONE, self.limits.per_drone, count(since, role, drone=drone) + 1)]
@@ -82,6 +84,9 @@ class RunLedger:
                     count(since, role, drone=drone, bits=True) + bits,
                 ),
             ]
+            if operator_bits is not None:
+                wanted = count(since, role, operator=operator, bits=True) + bits
+                checks.append((Scope.OPERATOR_BITS, operator_bits, wanted))
         for scope, limit, wanted in checks:
             if wanted > limit:
                 raise BudgetExceeded(scope, limit, self.limits.window_s)
@@ -94,9 +99,10 @@ class RunLedger:
         now: float,
         role: Role = BOB,
         bits: int = 0,
+        operator_bits: int | None = None,
     ) -> int:
         """Check, then count one run; its ticket, for :meth:`refund`."""
-        self.check(drone, operator, operator_limit, now, role, bits)
+        self.check(drone, operator, operator_limit, now, role, bits, operator_bits)
         self.store.forget_runs(now - 2 * self.limits.window_s)
         return self.store.record_run(now, drone, operator, role, bits)
 

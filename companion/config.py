@@ -29,6 +29,7 @@
     key = "acme.pub"                      # a PEM public key file, or 64 hex digits
     max_segments = 256                    # largest padded path of a run with its drones
     max_runs_per_hour = 24                # runs its drones together may ask of us
+    max_answer_bits_per_hour = 1024       # answer bits its drones together may get of us
     paper_keys = false                    # suite "paper": we accept its drones' unproven keys
     [limits]
     max_runs_per_peer = 8                 # runs one certified drone may ask of us per hour
@@ -132,6 +133,7 @@ def _credentials(doc: Table, base: Path, node: int) -> Credentials | None:
         text = entry.text("key")
         max_segments = entry.integer("max_segments", 256, low=1, high=MAX_SEGMENTS)
         runs = entry.integer("max_runs_per_hour", 24, low=1)
+        bits = entry.integer("max_answer_bits_per_hour", 1024, low=1)
         paper_keys = entry.flag("paper_keys", False)
         try:
             public = (
@@ -139,7 +141,16 @@ def _credentials(doc: Table, base: Path, node: int) -> Credentials | None:
                 if len(text.strip()) == 64 and not Path(text).suffix
                 else read_public_key(_path(base, text))
             )
-            operators.append(Operator(name, public, max_segments, runs, paper_keys))
+            operators.append(
+                Operator(
+                    name,
+                    public,
+                    max_segments=max_segments,
+                    max_runs_per_hour=runs,
+                    max_answer_bits_per_hour=bits,
+                    paper_keys=paper_keys,
+                )
+            )
         except (KeyFileError, ValueError) as exc:
             raise entry.fail(f"({name}) {exc}") from None
     return Credentials(Identity(key, cert), TrustStore(operators, UnknownPeers(policy)), state)

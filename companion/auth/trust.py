@@ -48,6 +48,9 @@ class Operator:
     key: PublicKey
     max_segments: int = 256  # largest padded path a run with its drones may have
     max_runs_per_hour: int = 24  # runs its drones together may ask of us per hour
+    # Answer bits its drones together may open per hour: a deviating operator's drones can
+    # each ask bits of their choosing (docs/security.md, D6); this bounds them all together.
+    max_answer_bits_per_hour: int = 1024
     # The paper suite's Paillier and DGK keys come without a proof that they are well formed
     # (docs/security.md, "A deviating peer"): we run it only with drones of operators we
     # trust to have checked their drones' keys.  The compact suite needs no such trust.
@@ -58,6 +61,8 @@ class Operator:
             raise ValueError(f"operator {self.name}: max_segments 1..256")
         if self.max_runs_per_hour < 1:
             raise ValueError(f"operator {self.name}: max_runs_per_hour >= 1")
+        if self.max_answer_bits_per_hour < 1:
+            raise ValueError(f"operator {self.name}: max_answer_bits_per_hour >= 1")
 
 
 class TrustStore:

@@ -75,6 +75,22 @@ def test_answer_bits_per_drone_bound_what_one_drone_learns(tmp_path: Path) -> No
     assert info.value.scope is Scope.DRONE_BITS
 
 
+def test_answer_bits_per_operator_bound_what_its_drones_learn_together(tmp_path: Path) -> None:
+    """D6 for a cheating operator: each of its certified drones may open up to the per-drone
+    bits, but all of them together only the operator's ``max_answer_bits_per_hour``; another
+    operator's drones are not held back by it, and the window slides."""
+    limits = RunLimits(per_drone=8, total=64, window_s=3600, bits_per_drone=256)
+    ledger = RunLedger(StateStore(tmp_path), limits)
+    for k, t in enumerate((0.0, 1.0, 2.0)):
+        ledger.admit(b"drone-%d" % k, b"op-x", 24, t, BOB, bits=256, operator_bits=800)
+    with pytest.raises(BudgetExceeded) as info:  # 768 + 64 > 800, though drone-3 is fresh
+        ledger.admit(b"drone-3", b"op-x", 24, 3.0, BOB, bits=64, operator_bits=800)
+    assert info.value.scope is Scope.OPERATOR_BITS and "800 bits" in str(info.value)
+    ledger.admit(b"drone-3", b"op-x", 24, 3.0, BOB, bits=32, operator_bits=800)  # 800: fits
+    ledger.admit(b"drone-9", b"op-y", 24, 4.0, BOB, bits=256, operator_bits=800)
+    ledger.admit(b"drone-3", b"op-x", 24, 3601.5, BOB, bits=128, operator_bits=800)  # slid
+
+
 def test_a_state_directory_from_before_the_bit_budget_is_upgraded(tmp_path: Path) -> None:
     import sqlite3
 

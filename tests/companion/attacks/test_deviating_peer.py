@@ -3,6 +3,7 @@ protocol alone does not stop yet (docs/security.md, "A deviating peer")."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -159,12 +160,15 @@ def test_a_bob_whose_ot_extension_fails_the_check_loses_the_setup(
     assert len(setup_ids) == len(set(setup_ids)) == 4  # a fresh setup after each failed check
 
 
+@pytest.mark.parametrize("scope", ["drone", "operator"])
 def test_a_deviating_alice_gets_no_more_answer_bits_than_the_budget(
-    tmp_path: Path, monkeypatch: Any
+    tmp_path: Path, monkeypatch: Any, scope: str
 ) -> None:
     """D6 (bounded): whatever a deviating Alice computes with her m output bits, Bob counts
-    them.  With 16 answer bits per drone and hour, a rogue drone's runs of 8 segments get two
-    answers, and the third request is refused (signed, BUDGET) before Bob builds anything."""
+    them, per drone and per operator.  With 16 answer bits per drone (or per operator) and
+    hour, runs of 8 segments get two answers -- from one rogue drone, or from two of one
+    operator -- and the third request is refused (signed, BUDGET) before Bob builds
+    anything, even from a drone that has used only 8 of its own bits."""
     built = count_bobs(monkeypatch)
     here = (474_011_000, 85_455_940)
 
@@ -172,17 +176,22 @@ def test_a_deviating_alice_gets_no_more_answer_bits_than_the_budget(
         w = await world(
             tmp_path,
             missions={2: "inspection_north.plan"},
-            extra={9: "fleet"},
-            settings={"max_answer_bits_per_peer": 16},
+            extra={9: "fleet", 10: "fleet"},
+            settings={"max_answer_bits_per_peer": 16} if scope == "drone" else {},
         )
-        rogue = await w.rogue(9)
-        await rogue.announce(w, here, size_class=3)
+        if scope == "operator":  # drone 2 trusts the rogues' operator with 16 bits an hour
+            operators = w.credentials[2].trust.operators
+            for fingerprint, op in operators.items():
+                operators[fingerprint] = dataclasses.replace(op, max_answer_bits_per_hour=16)
+        rogues = [await w.rogue(9)] + ([await w.rogue(10)] if scope == "operator" else [])
+        for rogue in rogues:
+            await rogue.announce(w, here, size_class=3)
         path = tuple((10 * k, 10 * (k % 2)) for k in range(9))  # 8 segments
         outcomes: list[Any] = []
-        for _ in range(3):
+        for k in range(3):
             grid = GridSpec.geo(*here, radius_m=2000)
             try:
-                outcomes.append(await rogue.compare(w, 2, path, grid))
+                outcomes.append(await rogues[k % len(rogues)].compare(w, 2, path, grid))
             except PeerRefused as exc:
                 outcomes.append(exc)
         await w.stop()
@@ -193,3 +202,4 @@ def test_a_deviating_alice_gets_no_more_answer_bits_than_the_budget(
     assert isinstance(third, PeerRefused) and third.code is Refusal.BUDGET
     assert len(built) == 2
     assert [e["reason"] for e in w.events(2, "refused")] == ["BUDGET"]
+    assert f"{scope} answer-bit limit" in w.events(2, "budget")[0]["error"]
