@@ -270,12 +270,11 @@ class AliceRuns(Edits):
                     return False
                 if exc.code is Refusal.UNKNOWN_PEER:
                     self._cert_now.set()  # it lacks our certificate: beacon it
-                box: dict[str, float] = {}
-                if exc.code is Refusal.BOX:  # off our beacons, or beyond the peer's limits
-                    box = {
-                        "box_radius_m": grid.range * grid.resolution_mm / 1000,
-                        "resolution_mm": grid.resolution_mm,
-                    }
+                box = (  # off our beacons, or beyond the peer's limits: which box we asked
+                    {"box_radius_m": grid.radius_m, "resolution_mm": grid.resolution_mm}
+                    if exc.code is Refusal.BOX
+                    else {}
+                )
                 self.record(
                     EventKind.RUN_FAILED,
                     peer=peer.node,

@@ -200,7 +200,7 @@ class BobAnswers(CompanionCore):
             return False  # a drone's run is on the globe
         if grid.resolution_mm < self.settings.min_grid_resolution_mm:
             return False
-        if grid.range * grid.resolution_mm > self.settings.max_box_radius_m * 1000:
+        if grid.radius_m > self.settings.max_box_radius_m:
             return False
         age = max(self.clock.now() - known.heard_at, 0.0)
         reach = BOX_SLACK_M + MAX_SPEED_M_S * age

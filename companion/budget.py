@@ -57,7 +57,7 @@ class RunLedger:
     def __init__(self, store: StateStore, limits: RunLimits) -> None:
         self.store, self.limits = store, limits
 
-    def check(
+    def admit(
         self,
         drone: bytes,
         operator: bytes,
@@ -66,11 +66,12 @@ class RunLedger:
         role: Role = BOB,
         bits: int = 0,
         operator_bits: int | None = None,
-    ) -> None:
-        """Raise :class:`BudgetExceeded` if one more run in ``role`` with ``drone`` (of
-        ``operator``, whose drones may ask ``operator_limit`` runs and open ``operator_bits``
-        answer bits per window together), one that opens ``bits`` answer bits to it, is too
-        many.  As Alice only the per-drone run limit applies."""
+    ) -> int:
+        """Count one more run in ``role`` with ``drone`` (of ``operator``, whose drones may
+        ask ``operator_limit`` runs and open ``operator_bits`` answer bits per window
+        together), one that opens ``bits`` answer bits to it; its ticket, for :meth:`refund`.
+        Raise :class:`BudgetExceeded` instead if that is too many.  As Alice only the
+        per-drone run limit applies."""
         since = now - self.limits.window_s
         count = self.store.count_runs
         checks = [(Scope.DRONE, self.limits.per_drone, count(since, role, drone=drone) + 1)]
@@ -90,19 +91,6 @@ class RunLedger:
         for scope, limit, wanted in checks:
             if wanted > limit:
                 raise BudgetExceeded(scope, limit, self.limits.window_s)
-
-    def admit(
-        self,
-        drone: bytes,
-        operator: bytes,
-        operator_limit: int,
-        now: float,
-        role: Role = BOB,
-        bits: int = 0,
-        operator_bits: int | None = None,
-    ) -> int:
-        """Check, then count one run; its ticket, for :meth:`refund`."""
-        self.check(drone, operator, operator_limit, now, role, bits, operator_bits)
         self.store.forget_runs(now - 2 * self.limits.window_s)
         return self.store.record_run(now, drone, operator, role, bits)
 

@@ -77,6 +77,11 @@ class GridSpec:
         return comparison_bits(self.range)
 
     @property
+    def radius_m(self) -> float:
+        """How far the box reaches from the reference point (geographic grids)."""
+        return self.range * self.resolution_mm / 1000
+
+    @property
     def span(self) -> int:
         """Bound on any coordinate difference."""
         return 2 * self.range

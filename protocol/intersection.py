@@ -32,12 +32,7 @@ from dataclasses import dataclass, field
 
 from .circuit import Circuit
 from .dgk import DGKPrivateKey
-from .errors import (
-    InputRangeError,
-    LocalProtocolError,
-    ProtocolError,
-    RemoteProtocolError,
-)
+from .errors import InputRangeError, LocalProtocolError, ProtocolError, RemoteProtocolError
 from .geometry import BobPath, Point, fit_to_box
 from .grid import GridKind, GridSpec
 from .ot.setup import DEFAULT_BLOCK_BITS, DEFAULT_SECURITY, ChooserSetup, HolderSetup
