@@ -197,8 +197,17 @@ def _parser() -> argparse.ArgumentParser:
     compare.add_argument("--json", action="store_true", help="machine-readable output")
     compare.set_defaults(func=commands.compare)
 
-    bench = sub.add_parser("bench-link", help="the paper's pairs and an 8x8 run over each profile")
-    bench.add_argument("--data", help="directory with the paper's data (default: the bundled copy)")
+    bench = sub.add_parser(
+        "bench-link", help="30 single-segment pairs and an 8x8 run over each profile"
+    )
+    bench.add_argument(
+        "--data",
+        type=cli.existing_dir,
+        default=None,
+        help="directory with the paper's benchmark files, whose 30 pairs are run (default: 30 "
+        "random pairs in +-99; the project does not carry the paper's files, e.g. "
+        "../shared/anchor-data)",
+    )
     bench.add_argument(
         "--profiles", type=_profiles, help="comma-separated link profiles (default: all)"
     )

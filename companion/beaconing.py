@@ -216,6 +216,6 @@ class Beaconing(Edits):
             b = hearing.beacon
             distance = distance_m(self.position[:2], (b.lat, b.lon))
             self.record(
-                EventKind.INTRUDER, peer=hearing.node, drone=drone.hex(), lat=b.lat, lon=b.lon,
-                alt_m_amsl=b.alt_m, distance_m=round(distance),
+                EventKind.INTRUDER, peer=hearing.node, drone=drone.hex(), lat_deg_e7=b.lat,
+                lon_deg_e7=b.lon, alt_m_amsl=b.alt_m, distance_m=round(distance),
             )  # fmt: skip

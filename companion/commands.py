@@ -10,7 +10,6 @@ import contextlib
 import json
 import signal
 import sys
-from pathlib import Path
 
 from protocol.tools import cli
 
@@ -278,14 +277,11 @@ def compare(args: argparse.Namespace) -> int:
 
 
 def bench_link(args: argparse.Namespace) -> int:
-    from protocol.tools.bench_paths import DEFAULT_DATA
-
     from .sim.bench_link import bench_link, format_link
 
-    data = Path(args.data) if args.data else DEFAULT_DATA
     profiles = list(args.profiles) if args.profiles else None
     result = bench_link(
-        data, profiles, suite=args.suite, range_=args.range, progress=not args.quiet
+        args.data, profiles, suite=args.suite, range_=args.range, progress=not args.quiet
     )
     print(json.dumps(result, indent=2) if args.json else format_link(result))
     return 0

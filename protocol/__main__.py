@@ -7,7 +7,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 from .tools import cli
 
@@ -47,10 +46,12 @@ def _bench(args: argparse.Namespace) -> int:
         result = bench_crypto(repeat=args.repeat or 15, progress=not args.quiet)
         text = format_crypto(result)
     elif args.what == "paper":
-        from .tools.bench_paths import DEFAULT_DATA, bench_paper, format_paper
+        from .tools.bench_paths import bench_paper, format_paper
+        from .tools.paper_data import HINT
 
-        data = Path(args.data) if args.data else DEFAULT_DATA
-        result = bench_paper(data, args.suite, progress=not args.quiet)
+        if args.data is None:
+            raise cli.InputError(f"bench paper: --data DIR is needed ({HINT})")
+        result = bench_paper(args.data, args.suite, progress=not args.quiet)
         text = format_paper(result)
     elif args.what == "design":
         from .tools.bench_paths import bench_design, format_design
@@ -103,7 +104,13 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "--suite", choices=["compact", "paper"], default="compact", help="cryptographic suite"
     )
-    bench.add_argument("--data", help="directory with the paper's data (paper; default: bundled)")
+    bench.add_argument(
+        "--data",
+        type=cli.existing_dir,
+        default=None,
+        help="directory with the paper's benchmark files (paper; needed: the project does not "
+        "carry them, e.g. ../shared/anchor-data)",
+    )
     bench.add_argument(
         "--sizes",
         type=cli.integers(1, 256),

@@ -2,7 +2,10 @@
 
 Usage: .venv/bin/python scripts/record_benchmarks.py [crypto] [paper] [paper-dgk] [scaling]
 [scaling-2000] [design] [link] [replays] [replays-px4] [demo] (default: all; replays-px4 only
-with PX4_SITL set to a PX4 SITL build) [--repeat N]
+with PX4_SITL set to a PX4 SITL build) [--repeat N] [--data DIR]
+
+``paper``, ``paper-dgk`` and ``link`` run the paper's benchmark files, read from ``--data DIR``
+(default: ``../shared/anchor-data`` beside the repository); the project does not carry them.
 
 Each section sits between markers ``<!-- bench NAME -->`` and ``<!-- /bench NAME -->``; the
 rest of the file is kept.  ``demo`` is README.md's: the summary ``make demo`` prints, so the
@@ -37,6 +40,7 @@ DOC = ROOT / "docs" / "benchmarks.md"
 README = ROOT / "README.md"
 TARGETS = {"demo": README}  # sections kept in another file than DOC
 SCENARIOS = ROOT / "sitl_configs" / "scenarios"
+ANCHOR = ROOT.parent / "shared" / "anchor-data"  # the paper's files, where they are
 
 
 def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
@@ -111,15 +115,15 @@ def demo() -> str:
     return f"{head}\n\n```\n{run.stdout.strip()}\n```"
 
 
-def sections(repeat: int) -> dict[str, Callable[[], str]]:
+def sections(repeat: int, data: Path) -> dict[str, Callable[[], str]]:
     return {
         "crypto": lambda: format_crypto(bench_crypto(repeat=repeat)),
-        "paper": lambda: format_paper(bench_paper(suite="compact")),
-        "paper-dgk": lambda: format_paper(bench_paper(suite="paper")),
+        "paper": lambda: format_paper(bench_paper(data, suite="compact")),
+        "paper-dgk": lambda: format_paper(bench_paper(data, suite="paper")),
         "scaling": lambda: format_scaling(bench_scaling()),
         "scaling-2000": lambda: format_scaling(bench_scaling((8, 16), range_=2000)),
         "design": lambda: format_design(bench_design()),
-        "link": lambda: format_link(bench_link()),
+        "link": lambda: format_link(bench_link(data)),
         "replays": replays,
         # PX4 SITL (needs PX4_SITL=build): the crossing and the in-flight crossing
         "replays-px4": lambda: replays(
@@ -139,15 +143,19 @@ def replace_section(text: str, name: str, body: str) -> str:
 
 
 def main() -> int:
-    table = sections(15)
+    table = sections(15, ANCHOR)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("names", nargs="*", help=f"sections: {', '.join(table)} (default all)")
     parser.add_argument("--repeat", type=int, default=15)
+    parser.add_argument("--data", type=Path, default=ANCHOR, help="the paper's benchmark files")
     args = parser.parse_args()
     unknown = set(args.names) - set(table)
     if unknown:
         parser.error(f"unknown sections: {', '.join(sorted(unknown))}")
-    table = sections(args.repeat)
+    needs_data = {"paper", "paper-dgk", "link"} & set(args.names or table)
+    if needs_data and not (args.data / "alices_segments.txt").is_file():
+        parser.error(f"{', '.join(sorted(needs_data))}: no paper's files in {args.data} (--data)")
+    table = sections(args.repeat, args.data)
     machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     default = [n for n in table if n != "replays-px4" or os.environ.get("PX4_SITL")]
     if "replays-px4" in args.names and not os.environ.get("PX4_SITL"):

@@ -1,8 +1,10 @@
-"""Shared fixtures: one real key set and one real OT setup per test session (112-bit floor)."""
+"""Shared fixtures: one real key set and one real OT setup per test session (112-bit floor);
+the paper's benchmark files where they are, and data of their shape made by the project."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 
@@ -10,6 +12,14 @@ from protocol.dgk import DGKPrivateKey, DGKPublicKey
 from protocol.intersection import DGK_BITS, BobKeys
 from protocol.ot.setup import ChooserSetup, HolderSetup, HolderSetupStart, chooser_setup
 from protocol.paillier import PaillierPrivateKey, PaillierPublicKey
+
+from .paper_shaped import (
+    ANCHOR,
+    ANCHOR_PAIR_BITS,
+    ANCHOR_ROUTE_HITS,
+    PaperShaped,
+    write_paper_shaped,
+)
 
 
 @dataclass(frozen=True)
@@ -55,3 +65,30 @@ def ot_pair() -> OtPair:
     start = HolderSetupStart()
     chooser, reply = chooser_setup(start.message(), start.blocks)
     return OtPair(chooser, start.finish(reply))
+
+
+@pytest.fixture(scope="session")
+def anchor_data() -> Path:
+    """The paper's own benchmark files, read from ``../shared/anchor-data`` (never carried)."""
+    if not (ANCHOR / "alices_segments.txt").is_file():
+        pytest.skip(
+            "the paper's benchmark files are not beside the repository (../shared/anchor-data)"
+        )
+    return ANCHOR
+
+
+@pytest.fixture(scope="session")
+def paper_shaped(tmp_path_factory: pytest.TempPathFactory) -> PaperShaped:
+    """The project's own data in the paper's layout, with answers (:mod:`tests.paper_shaped`)."""
+    return write_paper_shaped(tmp_path_factory.mktemp("paper-shaped"), seed=25)
+
+
+@pytest.fixture(params=["paper's files", "project's own"])
+def benchmark_data(request: pytest.FixtureRequest) -> PaperShaped:
+    """The paper's files with their published answers (skipped where they are not), then the
+    project's own data of the same shape."""
+    if request.param == "paper's files":
+        directory = request.getfixturevalue("anchor_data")
+        return PaperShaped(directory, ANCHOR_PAIR_BITS, ANCHOR_ROUTE_HITS)
+    result: PaperShaped = request.getfixturevalue("paper_shaped")
+    return result

@@ -23,7 +23,6 @@ from companion.auth.certificate import Certificate
 from companion.auth.keys import SigningKey, write_private_key, write_public_key
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "sitl_configs" / "scenarios"
-PAPER = Path(__file__).resolve().parents[1] / "protocol" / "data" / "anchor"
 
 
 @pytest.fixture
@@ -195,6 +194,11 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("sizes-empty", P, ["bench", "scaling", "--sizes", "1,,2"], "expected integers separated"),
     ("sizes-zero", P, ["bench", "scaling", "--sizes", "0"], "0 is out of range"),
     ("repeat", P, ["bench", "crypto", "--repeat", "0"], "--repeat: 0 is out of range"),
+    ("paper-no-data", P, ["bench", "paper"], "--data DIR is needed .the paper's benchmark files"),
+    ("paper-data-gone", P, ["bench", "paper", "--data", "{d}/gone"], "--data: .*gone: does not"),
+    ("paper-data-file", P, ["bench", "paper", "--data", "{d}/paths.txt"], "is not a directory"),
+    ("paper-data-empty", P, ["bench", "paper", "--data", "{d}/adir"], "no alices_segments.txt"),
+    ("link-data-empty", C, ["bench-link", "--data", "{d}/adir"], "adir: no alices_segments.txt"),
     ("p-compare-missing", P, ["compare", "{d}/missing.txt", "{d}/paths.txt"], "does not exist"),
     ("p-compare-plan", P, ["compare", "{d}/good.plan", "{d}/good.plan"], "python -m companion"),
     ("p-compare-range", P, ["compare", "{d}/paths.txt", "{d}/paths.txt", "--range", "0"], "0 is"),

@@ -1,10 +1,11 @@
 """``bench link``: the path comparison over every radio profile and loss, in real frames.
 
-For each profile and frame loss: the paper's 30 pairs (with the OT setup cached, and at first
-contact) and one random size x size case, each through :func:`~.over_link.link_case` on the
-virtual clock; medians per run of frames, bytes on the air, authentication bytes, airtime,
-simulated time and both parties' CPU.  Also each profile's frame sizes and header share, and
-what beacons cost (:func:`companion.beacon_budget.beacon_costs`).
+For each profile and frame loss: 30 single-segment pairs -- the paper's (``--data DIR``, read
+by :mod:`protocol.tools.paper_data`) or, without it, 30 random pairs of the same shape -- with
+the OT setup cached and at first contact, and one random size x size case, each through
+:func:`~.over_link.link_case` on the virtual clock; medians per run of frames, bytes on the
+air, authentication bytes, airtime, simulated time and both parties' CPU.  Also each profile's
+frame sizes and header share, and what beacons cost (:func:`companion.beacon_budget.beacon_costs`).
 """
 
 from __future__ import annotations
@@ -18,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from protocol.grid import GridKind, GridSpec
-from protocol.tools.bench_paths import DEFAULT_DATA, random_path
-from protocol.tools.compare import Case, Party, load_cases
-from protocol.tools.formats import InputFormatError
+from protocol.tools.bench_paths import random_pairs, random_path
+from protocol.tools.compare import Case, Party
+from protocol.tools.paper_data import load_paper_data
 from protocol.wire import Suite
 
 from ..beacon_budget import beacon_costs
@@ -65,7 +66,7 @@ def _row(
 
 
 def bench_link(
-    data: Path = DEFAULT_DATA,
+    data: Path | None = None,
     profiles: Sequence[str] | None = None,
     losses: Sequence[float] = LOSSES,
     suite: str = "compact",
@@ -74,15 +75,15 @@ def bench_link(
     seed: int = 1,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """The paper's 30 pairs and one size x size random case over each profile and loss."""
-    if not (data / "alices_segments.txt").exists():
-        raise InputFormatError(f"no benchmark data in {data} (use --data DIR)")
+    """The paper's 30 pairs from ``data`` (or 30 random pairs in +-99 without it) and one
+    size x size random case over each profile and loss."""
+    pairs = load_paper_data(data).pairs if data is not None else random_pairs()
+    kind = "paper pair" if data is not None else "random pair"
     profiles = list(profiles or PROFILES)
     for name in profiles:
         profile(name)  # unknown names fail before any work
     _say(progress, f"generating keys ({suite})")
     party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
-    pairs = load_cases(data / "alices_segments.txt", data / "bobs_segments.txt")
     grid = GridSpec(GridKind.PLANE, range_)
     paths = Case(random_path(size, range_), random_path(size, range_), grid)
     rows = []
@@ -90,23 +91,24 @@ def bench_link(
         link = PROFILES[name]
         for loss in losses:
             imp = Impairments(loss=loss)
-            _say(progress, f"{name}, loss {loss:.0%}: paper pairs")
+            _say(progress, f"{name}, loss {loss:.0%}: {kind}s")
             runs = [link_case(c, party, link, imp, seed + k) for k, c in enumerate(pairs)]
-            rows.append(_row(name, loss, "paper pair", runs))
+            rows.append(_row(name, loss, kind, runs))
             if party.setup is not None:  # two drones that never met: a fresh OT setup
-                _say(progress, f"{name}, loss {loss:.0%}: paper pairs, first contact")
+                _say(progress, f"{name}, loss {loss:.0%}: {kind}s, first contact")
                 fresh = dataclasses.replace(party, setup=None, setups={})
                 runs = [
                     link_case(c, dataclasses.replace(fresh, setups={}), link, imp, seed + k)
                     for k, c in enumerate(pairs)
                 ]
-                rows.append(_row(name, loss, "paper pair, first contact", runs))
+                rows.append(_row(name, loss, f"{kind}, first contact", runs))
             _say(progress, f"{name}, loss {loss:.0%}: {size} x {size} paths")
             rows.append(
                 _row(name, loss, f"{size}x{size}", [link_case(paths, party, link, imp, seed)])
             )
     return {
         "suite": suite,
+        "pairs_from": str(data) if data is not None else f"{len(pairs)} random pairs in +-99",
         "profiles": {
             n: {
                 "description": PROFILES[n].description,
@@ -133,9 +135,10 @@ def header_share(link: LinkProfile) -> float:
 
 def format_link(result: dict[str, Any]) -> str:
     lines = [
-        f"Link benchmark, suite {result['suite']}: medians per run; a paper pair is one "
-        f"1 x 1 comparison (keys included; the compact suite's one-time OT setup made before, "
-        f"as between drones that met; 'first contact': with a fresh OT setup), "
+        f"Link benchmark, suite {result['suite']}: medians per run; a "
+        f"{result['rows'][0]['workload']} ({result['pairs_from']}) is one 1 x 1 comparison "
+        "(keys included; the compact suite's one-time OT setup made before, as between drones "
+        "that met; 'first contact': with a fresh OT setup), "
         f"{result['rows'][-1]['workload']} one run (a single run, range "
         f"+-{result['grid_range']}).",
         "",

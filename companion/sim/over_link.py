@@ -102,6 +102,7 @@ async def _run(
         "bytes_bob_to_alice": bob_report.bytes_sent,
         "auth_bytes": report.auth_bytes_sent + bob_report.auth_bytes_sent,
         "messages": report.messages_sent + bob_report.messages_sent,
+        "round_trips": report.messages_sent,  # each of Alice's messages is one turn
         "cpu_s_alice": report.cpu_s,
         "cpu_s_bob": bob_report.cpu_s,
         "frames_sent": sum(s.frames_sent for s in stats),

@@ -8,7 +8,6 @@ setup, the paper suite's key generation) is reported on its own line, with its b
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import secrets
 import statistics
@@ -24,12 +23,9 @@ from ..intersection import Alice, Bob
 from ..ot import check
 from ..ot.setup import DEFAULT_SECURITY
 from ..wire import Suite
-from .compare import Case, Party, describe_once, load_cases, params_of, run_case
-from .formats import InputFormatError
+from .compare import Case, Party, describe_once, params_of, run_case
 from .loopback import run_paths
-
-# the paper's data, verbatim (MIT)
-DEFAULT_DATA = Path(__file__).resolve().parents[1] / "data" / "anchor"
+from .paper_data import load_paper_data
 
 # Quoted, not measured here: the paper's published figures, and its code as the project's
 # field notes measured it.
@@ -117,50 +113,32 @@ def _summary(results: list[dict[str, Any]], pairs: list[int]) -> dict[str, Any]:
     }
 
 
-def bench_paper(
-    data: Path = DEFAULT_DATA, suite: str = "compact", progress: bool = True
-) -> dict[str, Any]:
-    """The paper's 30 single-segment pairs and its 5 route tests."""
-    if not (data / "alices_segments.txt").exists():
-        raise InputFormatError(f"no benchmark data in {data} (use --data DIR)")
+def bench_paper(data: Path, suite: str = "compact", progress: bool = True) -> dict[str, Any]:
+    """The paper's 30 single-segment pairs and its 5 route tests, from the directory ``data``
+    (:mod:`.paper_data`)."""
+    paper = load_paper_data(data)
     _say(progress, f"generating keys ({suite})")
     party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
-    cases = load_cases(data / "alices_segments.txt", data / "bobs_segments.txt")
+    cases = paper.pairs
     pair_results, first_results = [], []
     for number, case in enumerate(cases, start=1):
         _say(progress, f"pair {number}/{len(cases)}")
         pair_results.append(_run(case, party))
         if party.setup is not None:  # and as the first contact of two drones: a fresh setup
             first_results.append(_run(case, dataclasses.replace(party, setup=None, setups={})))
-    expected_any: dict[int, bool] = {}
-    csv_path = data / "testroutine.csv"
-    if csv_path.exists():
-        with csv_path.open() as handle:
-            for row in csv.reader(handle):
-                if len(row) == 3 and row[0].strip():
-                    number = int("".join(ch for ch in row[0] if ch.isdigit()))
-                    expected_any[number] = row[2].strip().lower() == "true"
-    route_cases = []
-    for k in range(1, 6):
-        own, crypt = data / f"ownroute{k}.txt", data / f"cryptroute{k}.txt"
-        if own.exists() and crypt.exists():
-            route_cases.append((k, load_cases(own, crypt)[0]))
-    span = max(
-        (max(abs(c) for p in case.alice + case.bob for c in p) for _, case in route_cases),
-        default=1,
-    )
     routes = []
-    for k, case in route_cases:
-        _say(progress, f"route {k}")
-        fixed = Case(case.alice, case.bob, GridSpec(GridKind.PLANE, span))
-        result = _run(fixed, party)
-        result["route"] = k
-        result["segments"] = (len(case.alice) - 1, len(case.bob) - 1)
+    for route in paper.routes:
+        _say(progress, f"route {route.number}")
+        result = _run(route.case, party)
+        result["route"] = route.number
+        result["segments"] = (len(route.case.alice) - 1, len(route.case.bob) - 1)
         result["hit_indices"] = [i for i, h in enumerate(result["hits"]) if h]
-        result["expected_any"] = expected_any.get(k)
+        result["expected_any"] = route.expected_any
         routes.append(result)
+    span = paper.routes[0].case.grid.range if paper.routes else 1
     return {
         "suite": suite,
+        "data": str(paper.directory),
         "params": params_of(party, cases[0].grid),
         "route_grid_range": span,
         "route_comparison_bits": GridSpec(GridKind.PLANE, span).l,
@@ -203,7 +181,7 @@ def format_paper(result: dict[str, Any]) -> str:
         f"{p['comparison_bits']} bits (range +-{p['grid_range']}); once per pair of drones: "
         f"{describe_once(p)}.",
         "",
-        "| 30 single-segment pairs | this project | paper's code (quoted: field notes) "
+        f"| {s['runs']} single-segment pairs | this project | paper's code (quoted: field notes) "
         "| paper, published (quoted) |",
         "|---|---:|---:|---:|",
         f"| correct | {s['correct']}/{s['runs']} | 30/30 | - |",
@@ -247,6 +225,13 @@ def random_path(segments: int, range_: int) -> tuple[Point, ...]:
         (secrets.randbelow(2 * range_ + 1) - range_, secrets.randbelow(2 * range_ + 1) - range_)
         for _ in range(segments + 1)
     )
+
+
+def random_pairs(count: int = 30, range_: int = 99) -> list[Case]:
+    """``count`` random single-segment pairs in +-``range_``: the shape of the paper's
+    benchmark pairs, for a benchmark run without the paper's files."""
+    grid = GridSpec(GridKind.PLANE, range_)
+    return [Case(random_path(1, range_), random_path(1, range_), grid) for _ in range(count)]
 
 
 def bench_scaling(

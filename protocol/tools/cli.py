@@ -267,6 +267,15 @@ def existing_file(text: str) -> Path:
     return path
 
 
+def existing_dir(text: str) -> Path:
+    """An input directory that exists."""
+    path = Path(text)
+    if not path.is_dir():
+        what = "is not a directory" if path.exists() else "does not exist"
+        raise argparse.ArgumentTypeError(f"{text}: {what}")
+    return path
+
+
 def output_file(*suffixes: str) -> Callable[[str], Path]:
     """A file to write: its directory exists and is writable, its name ends in one of
     ``suffixes`` (any, if none are given).  Nothing is created here."""

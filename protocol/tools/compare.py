@@ -182,9 +182,10 @@ def run_case(case: Case, party: Party, limits: Limits | None = None) -> dict[str
         "bytes_alice_to_bob": t.bytes_alice_to_bob,
         "bytes_bob_to_alice": t.bytes_bob_to_alice,
         "messages": t.messages,
+        "round_trips": t.round_trips,
         "cpu_s_alice": t.cpu_alice,
         "cpu_s_bob": t.cpu_bob,
-        "message_sizes": dict(t.sizes),
+        "message_sizes": [[name, size] for name, size in t.sizes],
     }
 
 
@@ -245,8 +246,8 @@ def format_compare(result: dict[str, Any]) -> str:
         f"-> l = {p['comparison_bits']} bits; once per pair of drones: {describe_once(p)}",
         "",
         "| case | hits (Alice's segments) | plaintext | A->B bytes | B->A bytes | msgs "
-        "| Alice CPU s | Bob CPU s |",
-        "|---:|---|---|---:|---:|---:|---:|---:|",
+        "| round trips | Alice CPU s | Bob CPU s |",
+        "|---:|---|---|---:|---:|---:|---:|---:|---:|",
     ]
 
     def bits(values: Sequence[bool]) -> str:
@@ -256,7 +257,7 @@ def format_compare(result: dict[str, Any]) -> str:
         lines.append(
             f"| {number} | {bits(c['hits'])} | {bits(c['plain_hits'])} "
             f"| {c['bytes_alice_to_bob']} | {c['bytes_bob_to_alice']} | {c['messages']} "
-            f"| {c['cpu_s_alice']:.3f} | {c['cpu_s_bob']:.3f} |"
+            f"| {c['round_trips']} | {c['cpu_s_alice']:.3f} | {c['cpu_s_bob']:.3f} |"
         )
     if "link" in result:
         link = result["link"]

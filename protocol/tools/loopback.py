@@ -34,20 +34,26 @@ T = TypeVar("T")
 
 @dataclass
 class Transcript:
-    """Bytes and CPU seconds per direction/party, message counts and sizes."""
+    """Bytes and CPU seconds per direction/party, message counts and sizes, and round trips:
+    the turns Alice takes (a message or several of hers, then Bob's answer) -- what costs
+    radio turnarounds."""
 
     bytes_alice_to_bob: int = 0
     bytes_bob_to_alice: int = 0
     messages: int = 0
+    round_trips: int = 0
     cpu_alice: float = 0.0
     cpu_bob: float = 0.0
     sizes: list[tuple[str, int]] = field(default_factory=list)
+    _last_from_alice: bool = False
 
     def send(self, name: str, data: bytes, *, from_alice: bool) -> bytes:
         if from_alice:
             self.bytes_alice_to_bob += len(data)
+            self.round_trips += not self._last_from_alice
         else:
             self.bytes_bob_to_alice += len(data)
+        self._last_from_alice = from_alice
         self.messages += 1
         self.sizes.append((name, len(data)))
         return data

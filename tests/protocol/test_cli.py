@@ -9,6 +9,10 @@ from pathlib import Path
 
 import pytest
 
+from protocol.tools.bench_paths import format_paper
+
+from ..paper_shaped import PaperShaped
+
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
@@ -31,6 +35,11 @@ def test_compare_json(tmp_path: Path) -> None:
     assert second["hits"] == second["plain_hits"] == [True, True]
     for case in out["cases"]:
         assert 8 <= case["messages"] <= 16 and case["messages"] % 2 == 0  # Bob sends the last
+        assert case["round_trips"] == case["messages"] // 2  # Alice's turns, each answered
+        sizes = case["message_sizes"]  # every message, in order, repeated names kept
+        assert len(sizes) == case["messages"] and sizes[0][0] == "HELLO"
+        sent = sum(size for _, size in sizes)
+        assert sent == case["bytes_alice_to_bob"] + case["bytes_bob_to_alice"]
         assert case["bytes_alice_to_bob"] > 0 and case["cpu_s_bob"] > 0
 
 
@@ -97,3 +106,20 @@ def test_compare_sends_mission_files_to_the_companion(tmp_path: Path) -> None:
     # mission files are compared on the path the autopilot flies: the companion's model
     refused = run_cli("compare", str(alice), str(bob), "--json")
     assert refused.returncode == 2 and "python -m companion compare" in refused.stderr
+
+
+@pytest.mark.slow
+def test_bench_paper_reads_the_data_directory(paper_shaped: PaperShaped) -> None:
+    """``bench paper --data DIR``: the pairs and the routes of a directory in the paper's
+    layout (here the project's own data of that shape), each answered correctly."""
+    result = run_cli("bench", "paper", "--data", str(paper_shaped.directory), "--json", "--quiet")
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert out["data"] == str(paper_shaped.directory)
+    assert out["pairs"]["runs"] == out["pairs"]["correct"] == 30
+    assert out["first_contact"]["runs"] == out["first_contact"]["correct"] == 30
+    routes = {r["route"]: r for r in out["routes"]}
+    for number, expected in paper_shaped.route_hits.items():
+        assert routes[number]["hit_indices"] == expected
+        assert routes[number]["expected_any"] is bool(expected)
+    assert "| correct | 30/30 |" in format_paper(out)  # the table the command prints

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 from typing import Any
 
 import pytest
@@ -13,10 +12,11 @@ from protocol.errors import InputRangeError, LocalProtocolError, RemoteProtocolE
 from protocol.geometry import Point, pad_path, path_hits
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob, Limits, State
-from protocol.tools.bench_paths import DEFAULT_DATA
 from protocol.tools.loopback import run_paths
+from protocol.tools.paper_data import load_paper_data
 from protocol.wire import Suite
 
+from ..paper_shaped import PaperShaped
 from .adversarial import ADVERSARIAL, R
 from .paths import GRID, machines, run
 
@@ -83,31 +83,28 @@ def test_paper_suite_multi_segment(keys: Any) -> None:
     assert hits == [True, True]
 
 
-def _read(name: str) -> list[tuple[Point, ...]]:
-    lines = (DEFAULT_DATA / name).read_text().split()
-    return [
-        tuple((int(x), int(y)) for x, y in re.findall(r"\((-?\d+),(-?\d+)\)", ln)) for ln in lines
-    ]
-
-
-def test_paper_benchmark_pairs(ot_pair: Any) -> None:
-    """The 30 pairs of the paper's benchmark against the answers in anchor-data/README.md."""
-    expected = "110111000101101010000100000110"
-    alice, bob = _read("alices_segments.txt"), _read("bobs_segments.txt")
+def test_benchmark_pairs(benchmark_data: PaperShaped, ot_pair: Any) -> None:
+    """The 30 single-segment pairs (the paper's, or the project's of the same shape), read as
+    ``bench paper`` reads them, against their answers."""
+    pairs = load_paper_data(benchmark_data.directory).pairs
     got = "".join(
-        "1" if run(a, b, Suite.COMPACT, None, ot_pair)[0][0] else "0"
-        for a, b in zip(alice, bob, strict=True)
+        "1" if run(c.alice, c.bob, Suite.COMPACT, None, ot_pair, c.grid)[0][0] else "0"
+        for c in pairs
     )
-    assert got == expected
+    assert got == benchmark_data.pair_bits
 
 
-@pytest.mark.parametrize(
-    ("route", "indices"), [(1, [0, 3]), (2, [0, 2]), (3, [0, 1, 2]), (4, []), (5, [1, 2, 3])]
-)
-def test_paper_routes(route: int, indices: list[int], ot_pair: Any) -> None:
-    alice, bob = _read(f"ownroute{route}.txt")[0], _read(f"cryptroute{route}.txt")[0]
-    hits, _ = run(alice, bob, Suite.COMPACT, None, ot_pair, GridSpec(GridKind.PLANE, 1500))
-    assert [i for i, h in enumerate(hits) if h] == indices
+def test_benchmark_routes(benchmark_data: PaperShaped, ot_pair: Any) -> None:
+    """The five route tests: Alice's segments that meet Bob's path, and testroutine.csv's
+    "any intersection" per route."""
+    routes = load_paper_data(benchmark_data.directory).routes
+    assert [r.number for r in routes] == [1, 2, 3, 4, 5]
+    for route in routes:
+        c = route.case
+        hits, _ = run(c.alice, c.bob, Suite.COMPACT, None, ot_pair, c.grid)
+        expected = benchmark_data.route_hits[route.number]
+        assert [i for i, h in enumerate(hits) if h] == expected, route.number
+        assert route.expected_any is bool(expected)
 
 
 def test_geographic_paths(ot_pair: Any) -> None:

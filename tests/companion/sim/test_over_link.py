@@ -12,9 +12,11 @@ import pytest
 from companion.link import PROFILES
 from companion.sim.bench_link import bench_link, format_link
 from companion.sim.over_link import link_case
-from protocol.tools.bench_paths import DEFAULT_DATA
-from protocol.tools.compare import Party, load_cases
+from protocol.tools.compare import Party
+from protocol.tools.paper_data import load_paper_data
 from protocol.wire import Suite
+
+from ...paper_shaped import PaperShaped
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
@@ -70,8 +72,11 @@ def test_compare_table_and_bad_profile(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_bench_link_rows() -> None:
-    result = bench_link(DEFAULT_DATA, ["ideal", "us915-sf9"], (0.0, 0.3), size=2, progress=False)
+def test_bench_link_rows(paper_shaped: PaperShaped) -> None:
+    """The paper's 30 pairs from a data directory (here the project's of their shape)."""
+    data = paper_shaped.directory
+    result = bench_link(data, ["ideal", "us915-sf9"], (0.0, 0.3), size=2, progress=False)
+    assert result["pairs_from"] == str(data)
     rows = result["rows"]
     assert len(rows) == 2 * 2 * 3  # profiles x losses x (paper pair, first contact, 2x2)
     for row in rows:
@@ -94,10 +99,23 @@ def test_bench_link_rows() -> None:
     assert "| us915-sf9 | signed | 131 | 3 |" in table
 
 
-def test_authentication_adds_the_key_exchange_and_a_tag_per_message() -> None:
+@pytest.mark.slow
+def test_bench_link_without_data_runs_random_pairs() -> None:
+    """Without ``--data`` the benchmark runs 30 random pairs of the paper's shape and says so."""
+    result = bench_link(None, ["ideal"], (0.0,), size=1, progress=False)
+    assert result["pairs_from"] == "30 random pairs in +-99"
+    rows = {r["workload"]: r for r in result["rows"]}
+    assert set(rows) == {"random pair", "random pair, first contact", "1x1"}
+    assert rows["random pair"]["runs"] == rows["random pair"]["correct"] == 30
+    assert "a random pair (30 random pairs in +-99) is one 1 x 1" in format_link(result)
+
+
+def test_authentication_adds_the_key_exchange_and_a_tag_per_message(
+    paper_shaped: PaperShaped,
+) -> None:
     """The same run with and without authentication: the difference is 109 bytes on the
     request, 129 on the answer and 16 on every further message, and nothing else."""
-    case = load_cases(DEFAULT_DATA / "alices_segments.txt", DEFAULT_DATA / "bobs_segments.txt")[0]
+    case = load_paper_data(paper_shaped.directory).pairs[0]
     party = Party.generate(Suite.COMPACT)
     plain = link_case(case, party, PROFILES["ideal"], authenticated=False)
     secure = link_case(case, party, PROFILES["ideal"])
