@@ -9,6 +9,7 @@ import json
 import sys
 
 from .tools import cli
+from .volumes import MAX_SEPARATION
 
 DESCRIPTION = (
     "The encrypted path-intersection protocol of private drone deconfliction: Alice learns "
@@ -32,13 +33,24 @@ def _demo(_args: argparse.Namespace) -> int:
 
 def _compare(args: argparse.Namespace) -> int:
     from .tools.compare import compare, format_compare
+    from .volumes import Separation
 
-    result = compare(args.alice, args.bob, args.suite, range_=args.range, progress=not args.json)
+    result = compare(
+        args.alice,
+        args.bob,
+        args.suite,
+        range_=args.range,
+        progress=not args.json,
+        separation=Separation(args.separation, args.vertical_separation),
+        time_tolerance=args.time_tolerance,
+    )
     print(json.dumps(result, indent=2) if args.json else format_compare(result))
     return 0 if all(c["hits"] == c["plain_hits"] for c in result["cases"]) else 1
 
 
 def _bench(args: argparse.Namespace) -> int:
+    from .volumes import Separation
+
     result: dict[str, object]
     if args.what == "crypto":
         from .tools.bench import bench_crypto, format_crypto
@@ -51,7 +63,9 @@ def _bench(args: argparse.Namespace) -> int:
 
         if args.data is None:
             raise cli.InputError(f"bench paper: --data DIR is needed ({HINT})")
-        result = bench_paper(args.data, args.suite, progress=not args.quiet)
+        result = bench_paper(
+            args.data, args.suite, progress=not args.quiet, separation=Separation(args.separation)
+        )
         text = format_paper(result)
     elif args.what == "design":
         from .tools.bench_paths import bench_design, format_design
@@ -63,7 +77,12 @@ def _bench(args: argparse.Namespace) -> int:
 
         sizes = args.sizes or (1, 2, 4, 8, 16, 32)
         result = bench_scaling(
-            sizes, args.suite, args.range or 99, progress=not args.quiet, repeat=args.repeat or 3
+            sizes,
+            args.suite,
+            args.range or 99,
+            progress=not args.quiet,
+            repeat=args.repeat or 3,
+            separation=Separation(args.separation),
         )
         text = format_scaling(result)
     print(json.dumps(result, indent=2) if args.json else text)
@@ -78,7 +97,9 @@ def _parser() -> argparse.ArgumentParser:
 
     compare = sub.add_parser("compare", help="run the encrypted path comparison on two files")
     compare.add_argument(
-        "alice", type=cli.existing_file, help="Alice's paths: paper format (x,y)(x,y)..."
+        "alice",
+        type=cli.existing_file,
+        help="Alice's paths: paper format (x,y)(x,y)..., or (x,y,z) / (x,y,z,t) vertices",
     )
     compare.add_argument("bob", type=cli.existing_file, help="Bob's paths, same format")
     compare.add_argument(
@@ -89,6 +110,27 @@ def _parser() -> argparse.ArgumentParser:
         type=cli.integer(1, 1 << 28),
         default=None,
         help="public grid range R (default: the files' extent)",
+    )
+    compare.add_argument(
+        "--separation",
+        type=cli.integer(0, MAX_SEPARATION),
+        default=0,
+        help="horizontal separation r in grid units: segments within r conflict (0: the "
+        "paper's crossing test)",
+    )
+    compare.add_argument(
+        "--vertical-separation",
+        type=cli.integer(0, MAX_SEPARATION),
+        default=0,
+        help="vertical separation in grid units: altitude bands within it conflict (vertices "
+        "written (x,y,z) give the bands)",
+    )
+    compare.add_argument(
+        "--time-tolerance",
+        type=cli.integer(0, 1 << 20),
+        default=0,
+        help="seconds each time window is widened by on either side (vertices written "
+        "(x,y,z,t) give the windows)",
     )
     compare.add_argument("--json", action="store_true", help="machine-readable output")
     for option in RADIO_OPTIONS:
@@ -123,6 +165,13 @@ def _parser() -> argparse.ArgumentParser:
         type=cli.integer(1, 1 << 28),
         default=None,
         help="coordinate range (scaling, design; default 99)",
+    )
+    bench.add_argument(
+        "--separation",
+        type=cli.integer(0, MAX_SEPARATION),
+        default=0,
+        help="horizontal separation in grid units (paper, scaling; compact suite; 0: the "
+        "crossing test)",
     )
     bench.add_argument("--json", action="store_true", help="machine-readable output")
     bench.add_argument(

@@ -18,6 +18,7 @@ reference); :mod:`protocol.gmw` (Beaver triples from OT) and :mod:`protocol.hega
 from __future__ import annotations
 
 import enum
+import heapq
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -75,14 +76,21 @@ class Circuit:
         return self.not_(self.and_(self.not_(a), self.not_(b)))
 
     def and_all(self, wires: Sequence[int]) -> int:
-        """AND of all ``wires`` as a balanced tree (depth ceil(log2 len))."""
+        """AND of all ``wires``, the two of lowest level first (Huffman by level): a balanced
+        tree (depth ceil(log2 len)) over wires of one level, and no deeper than needed over
+        wires that are ready at different levels."""
         if not wires:
             raise LocalProtocolError("AND of nothing")
-        layer = list(wires)
-        while len(layer) > 1:
-            paired = [self.and_(layer[i], layer[i + 1]) for i in range(0, len(layer) - 1, 2)]
-            layer = paired + ([layer[-1]] if len(layer) % 2 else [])
-        return layer[0]
+        heap = [(self.level[w], order, w) for order, w in enumerate(wires)]
+        heapq.heapify(heap)
+        order = len(heap)
+        while len(heap) > 1:
+            _, _, a = heapq.heappop(heap)
+            _, _, b = heapq.heappop(heap)
+            wire = self.and_(a, b)
+            heapq.heappush(heap, (self.level[wire], order, wire))
+            order += 1
+        return heap[0][2]
 
     def or_all(self, wires: Sequence[int]) -> int:
         return self.not_(self.and_all([self.not_(w) for w in wires]))

@@ -185,12 +185,15 @@ class BobPath:
     segment of the public size and shows nothing.  ``everywhere``: Bob could not fit his path
     into n segments; the protocol then answers *meets* for every one of Alice's segments
     (segment 0 is a link and Bob's flag input turns its wire to 1): a false alarm, never a
-    missed crossing, in a run that looks like any other.
+    missed crossing, in a run that looks like any other.  ``bands`` and ``windows``: per
+    segment, a cut piece keeps its segment's, padding the last one's (:mod:`protocol.volumes`).
     """
 
     points: tuple[Point, ...]
     links: frozenset[int] = frozenset()
     everywhere: bool = False
+    bands: tuple[tuple[int, int], ...] | None = None
+    windows: tuple[tuple[int, int], ...] | None = None
 
     @property
     def segments(self) -> int:
@@ -215,7 +218,12 @@ class BobPath:
         ]
 
 
-def fit_to_box(path: Sequence[Point], r: int, n: int) -> BobPath:
+Intervals = Sequence[tuple[int, int]] | None
+
+
+def fit_to_box(
+    path: Sequence[Point], r: int, n: int, bands: Intervals = None, windows: Intervals = None
+) -> BobPath:
     """Bob's path as far as it lies in the public box [-r, r]^2, in exactly n segments.
 
     ``n`` is the public size, chosen from Bob's own path alone (never from where it lies), so
@@ -224,13 +232,15 @@ def fit_to_box(path: Sequence[Point], r: int, n: int) -> BobPath:
     every waypoint is; pieces that do not share an end are joined by links (see
     :class:`BobPath`), so the answer inside the box is that of the uncut path.  Whatever
     does not fit into n segments makes the answer *meets everywhere*; a path with nothing in
-    the box is a link at a corner, which meets nothing.
+    the box is a link at a corner, which meets nothing.  ``bands`` and ``windows`` (one per
+    segment of ``path``) follow the pieces.
     """
     if n < 1:
         raise ValueError("a path has at least one segment")
     points: list[Point] = []
     links: set[int] = set()
-    for p, q in itertools.pairwise(path):
+    owner: list[int] = []  # per kept segment: the segment of ``path`` it comes from
+    for s, (p, q) in enumerate(itertools.pairwise(path)):
         part = _clip(p, q, r)
         if part is None:
             continue
@@ -238,11 +248,26 @@ def fit_to_box(path: Sequence[Point], r: int, n: int) -> BobPath:
         if points and points[-1] != a:
             links.add(len(points) - 1)
             points.append(a)
+            owner.append(s)
         elif not points:
             points.append(a)
         points.append(b)
-    if not points:
-        return BobPath(((r, r),) * (n + 1), frozenset(range(n)))
-    if len(points) - 1 > n:
-        return BobPath(((r, r),) * (n + 1), frozenset(range(n)), everywhere=True)
-    return BobPath(pad_path(points, n), frozenset(links))
+        owner.append(s)
+
+    def follow(intervals: Intervals, kept: Sequence[int]) -> tuple[tuple[int, int], ...] | None:
+        if intervals is None:
+            return None
+        out = [intervals[s] for s in kept] or [intervals[-1]]
+        return tuple(out + [out[-1]] * (n - len(out)))
+
+    if not points or len(points) - 1 > n:  # nothing in the box, or too much: all links
+        return BobPath(
+            ((r, r),) * (n + 1),
+            frozenset(range(n)),
+            bool(points),
+            follow(bands, ()),
+            follow(windows, ()),
+        )
+    return BobPath(
+        pad_path(points, n), frozenset(links), False, follow(bands, owner), follow(windows, owner)
+    )

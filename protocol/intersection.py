@@ -29,6 +29,7 @@ import enum
 import functools
 from collections.abc import Callable, MutableMapping, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from .circuit import Circuit
 from .dgk import DGKPrivateKey
@@ -37,8 +38,19 @@ from .geometry import BobPath, Point, fit_to_box
 from .grid import GridKind, GridSpec
 from .ot.setup import DEFAULT_BLOCK_BITS, DEFAULT_SECURITY, ChooserSetup, HolderSetup
 from .paillier import PaillierPrivateKey
-from .pathcircuit import Orient, Proj, path_hits
+from .pathcircuit import Capsules, Orient, Proj, Range, volume_hits
+from .volumes import (
+    CROSSING,
+    MAX_SEPARATION,
+    NO_SEPARATION,
+    Route,
+    Separation,
+    VolumeSpec,
+    as_route,
+)
 from .wire import Hello, Suite, put_blob
+
+W = TypeVar("W")
 
 MAX_SEGMENTS = 256
 MAX_MODULUS_BITS = 4096  # bounds the work a peer's key can impose
@@ -48,10 +60,12 @@ DGK_BITS = 85  # the paper suite's DGK u = 263 holds comparison terms for l <= 8
 @dataclass(frozen=True, slots=True)
 class Limits:
     """Public size policy.  ``max_segments`` bounds n and m (the probing attack needs many);
-    ``pad_to_power_of_two`` hides a path's exact length inside its power-of-two bucket."""
+    ``pad_to_power_of_two`` hides a path's exact length inside its power-of-two bucket;
+    ``max_separation`` bounds the horizontal separation a peer may ask for (grid units)."""
 
     max_segments: int = MAX_SEGMENTS
     pad_to_power_of_two: bool = True
+    max_separation: int = MAX_SEPARATION
 
     def padded(self, segments: int) -> int:
         if not 1 <= segments <= self.max_segments:
@@ -68,46 +82,127 @@ class Limits:
 
 
 class Kind(enum.IntEnum):
+    """The linear forms a run computes (:mod:`protocol.geometry`, :mod:`protocol.volumes`)."""
+
     O1 = 0  # orient(A_i, A_i+1, B_k): Alice segment i, Bob vertex k
     T = 1  # projection of Bob vertex k on Alice segment i
     O3 = 2  # orient(B_k, B_k+1, A_j): Bob segment k, Alice vertex j
+    T3 = 3  # (A_j - B_k) . (B_k+1 - B_k): Alice vertex j along Bob segment k (capsules)
+    D = 4  # |A_j - B_k|^2: Alice vertex j, Bob vertex k (capsules)
+
+
+@dataclass(frozen=True, slots=True)
+class Wires:
+    """What the comparisons of one form give the circuit: ``orient`` (O1, O3), ``proj`` (T),
+    ``near`` (|O1| <= R_i, |O3| <= R'_k, 0 <= T3 <= L_k: capsules) and ``disc`` (D <= r^2)."""
+
+    orient: Orient | None = None
+    proj: Proj | None = None
+    near: Range | None = None
+    disc: int | None = None
 
 
 @dataclass(frozen=True)
 class Layout:
-    """The compared values of an m x n run, in their public order: every O1, every T, every
-    O3, each row by row."""
+    """The forms of an m x n run, in their public order: every O1, every T, every O3, each row
+    by row; with ``capsules`` (a horizontal separation r > 0) then every T3 and every D.
+    ``bands`` and ``windows``: the run also compares altitude bands and time windows, per
+    segment pair (no forms: each party's own numbers)."""
 
     m: int
     n: int
+    capsules: bool = False
+    bands: bool = False
+    windows: bool = False
     values: tuple[tuple[Kind, int, int], ...] = field(init=False)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "values", tuple(v for kind in self.kinds for v in self._of(kind)))
+
+    @property
+    def kinds(self) -> tuple[Kind, ...]:
+        crossing = (Kind.O1, Kind.T, Kind.O3)
+        return crossing + ((Kind.T3, Kind.D) if self.capsules else ())
+
+    def _shape(self, kind: Kind) -> tuple[int, int]:
+        """(rows, columns) of a kind: Alice's segments or vertices, Bob's vertices or segments."""
         m, n = self.m, self.n
-        values = (
-            [(Kind.O1, i, k) for i in range(m) for k in range(n + 1)]
-            + [(Kind.T, i, k) for i in range(m) for k in range(n + 1)]
-            + [(Kind.O3, j, k) for j in range(m + 1) for k in range(n)]
-        )
-        object.__setattr__(self, "values", tuple(values))
+        return {
+            Kind.O1: (m, n + 1),
+            Kind.T: (m, n + 1),
+            Kind.O3: (m + 1, n),
+            Kind.T3: (m + 1, n),
+            Kind.D: (m + 1, n + 1),
+        }[kind]
+
+    def _of(self, kind: Kind) -> list[tuple[Kind, int, int]]:
+        rows, cols = self._shape(kind)
+        return [(kind, row, col) for row in range(rows) for col in range(cols)]
 
     def position(self, kind: Kind, row: int, col: int) -> int:
-        m, n = self.m, self.n
-        if kind is Kind.O1:
-            return row * (n + 1) + col
-        if kind is Kind.T:
-            return m * (n + 1) + row * (n + 1) + col
-        return 2 * m * (n + 1) + row * n + col
+        start = 0
+        for other in self.kinds:
+            rows, cols = self._shape(other)
+            if other is kind:
+                return start + row * cols + col
+            start += rows * cols
+        raise LocalProtocolError(f"this run has no {kind.name} values")
 
-    def outputs(self, circuit: Circuit, orient: Sequence[Orient], proj: Sequence[Proj]) -> None:
-        """Add the path circuit on the per-value wires (``orient`` for O1/O3 positions,
-        ``proj`` for T positions, indexed by position; other entries are ignored), and Bob's
-        flag as the circuit's last input (Alice's share 0; see ``pathcircuit.path_hits``)."""
-        m, n = self.m, self.n
-        o1 = [[orient[self.position(Kind.O1, i, k)] for k in range(n + 1)] for i in range(m)]
-        tt = [[proj[self.position(Kind.T, i, k)] for k in range(n + 1)] for i in range(m)]
-        o3 = [[orient[self.position(Kind.O3, j, k)] for k in range(n)] for j in range(m + 1)]
-        for wire in path_hits(circuit, m, n, o1, tt, o3, circuit.input()):
+    def pairs(self) -> list[tuple[int, int]]:
+        """Alice's segment i and Bob's segment k, row by row: the order of band and window
+        comparisons."""
+        return [(i, k) for i in range(self.m) for k in range(self.n)]
+
+    def outputs(
+        self,
+        circuit: Circuit,
+        wires: Sequence[Wires],
+        bands: Sequence[Range] | None = None,
+        windows: Sequence[Range] | None = None,
+    ) -> None:
+        """Add the conflict circuit (:func:`protocol.pathcircuit.volume_hits`) on the per-form
+        ``wires`` (indexed by position) and the per-pair ``bands`` and ``windows`` (in
+        :meth:`pairs` order), and Bob's flag as the circuit's last input (Alice's share 0)."""
+
+        def grid(kind: Kind, pick: Callable[[Wires], W | None]) -> list[list[W]]:
+            rows, cols = self._shape(kind)
+            out: list[list[W]] = []
+            for row in range(rows):
+                line = []
+                for col in range(cols):
+                    value = pick(wires[self.position(kind, row, col)])
+                    if value is None:
+                        raise LocalProtocolError(f"no wire for {kind.name} ({row}, {col})")
+                    line.append(value)
+                out.append(line)
+            return out
+
+        def per_pair(ranges: Sequence[Range] | None) -> list[list[Range]] | None:
+            if ranges is None:
+                return None
+            return [list(ranges[i * self.n : (i + 1) * self.n]) for i in range(self.m)]
+
+        capsules = None
+        if self.capsules:
+            capsules = Capsules(
+                near1=grid(Kind.O1, lambda w: w.near),
+                near3=grid(Kind.O3, lambda w: w.near),
+                along3=grid(Kind.T3, lambda w: w.near),
+                disc=grid(Kind.D, lambda w: w.disc),
+            )
+        hits = volume_hits(
+            circuit,
+            self.m,
+            self.n,
+            grid(Kind.O1, lambda w: w.orient),
+            grid(Kind.T, lambda w: w.proj),
+            grid(Kind.O3, lambda w: w.orient),
+            capsules=capsules,
+            bands=per_pair(bands),
+            windows=per_pair(windows),
+            flag=circuit.input(),
+        )
+        for wire in hits:
             circuit.output(wire)
 
 
@@ -207,21 +302,22 @@ class BobKeys:
         return prove(self.paillier)
 
 
-PathSource = Sequence[Point] | Callable[[Hello], Sequence[Point]]
+PathSource = Sequence[Point] | Route | Callable[[Hello], Sequence[Point] | Route]
 
 
 def bob_path(source: PathSource, hello: Hello, *, geographic: bool, limits: Limits) -> BobPath:
     """Bob's path on Alice's grid, cut to its box (:func:`protocol.geometry.fit_to_box`), in
     the public size n: the padded size of his own path (at most ``max_segments``), whatever
-    Alice's grid -- so neither a refusal nor the size tells her where his path lies."""
-    raw = tuple(source(hello) if callable(source) else source)
-    if len(raw) < 2:
-        raise InputRangeError("a path needs at least two points")
+    Alice's grid -- so neither a refusal nor the size tells her where his path lies.  A
+    :class:`~protocol.volumes.Route` brings its bands (grid units) and windows (seconds after
+    the hello's epoch) along."""
+    raw = source(hello) if callable(source) else source
+    route = as_route(raw)
     if geographic != (hello.grid.kind is GridKind.GEO):
         raise RemoteProtocolError("peer's grid kind does not match this path's coordinates")
-    on_grid = hello.grid.project_path(raw, checked=False) if geographic else raw
-    n = limits.padded(min(len(raw) - 1, limits.max_segments))
-    return fit_to_box(on_grid, hello.grid.range, n)
+    points = hello.grid.project_path(route.points, checked=False) if geographic else route.points
+    n = limits.padded(min(route.segments, limits.max_segments))
+    return fit_to_box(points, hello.grid.range, n, route.bands, route.windows)
 
 
 class Alice:
@@ -239,7 +335,7 @@ class Alice:
 
     def __init__(
         self,
-        path: Sequence[Point],
+        path: Sequence[Point] | Route,
         grid: GridSpec,
         *,
         suite: Suite = Suite.COMPACT,
@@ -247,26 +343,33 @@ class Alice:
         kappa: int = 40,
         limits: Limits = Limits(),
         horizon_m: int = 0,
+        volumes: VolumeSpec = CROSSING,
         digit_bits: int | None = None,
         block_bits: int = DEFAULT_BLOCK_BITS,
         ot_security: int = DEFAULT_SECURITY,
         trusted_keys: bool = False,
         insecure_for_tests: bool = False,
     ) -> None:
-        if len(path) < 2:
+        if not isinstance(path, Route) and len(path) < 2:
             raise InputRangeError("a path needs at least two points")
-        grid.check_points(path)
+        route = as_route(path)
+        grid.check_points(route.points)
+        if (route.bands is not None and not volumes.bands) or (
+            route.windows is not None and not volumes.windows
+        ):
+            raise InputRangeError("bands and windows need an altitude and a time range")
         self.suite = suite
         self._impl: AliceSide
         if suite is Suite.COMPACT:
             from .suite_compact import CompactAlice
 
             self._impl = CompactAlice(
-                path,
+                route,
                 grid,
                 setup=setup,
                 limits=limits,
                 horizon_m=horizon_m,
+                volumes=volumes,
                 digit_bits=digit_bits,
                 block_bits=block_bits,
                 ot_security=ot_security,
@@ -274,8 +377,13 @@ class Alice:
         else:
             from .suite_paper import PaperAlice
 
+            if volumes != CROSSING:
+                raise InputRangeError(
+                    "the paper suite computes the paper's predicate (the crossing) only: "
+                    "separation, altitudes and times need the compact suite"
+                )
             self._impl = PaperAlice(
-                path,
+                route.points,
                 grid,
                 kappa=kappa,
                 limits=limits,
@@ -334,9 +442,12 @@ class Alice:
 class Bob:
     """The answering party: learns nothing about Alice's path or the result.
 
-    ``path`` is his polyline (grid points, or WGS84 degE7 with ``geographic``), or a function
-    of Alice's hello (to cut it at her horizon).  ``setups`` keeps compact-suite OT setups by
+    ``path`` is his polyline (grid points, or WGS84 degE7 with ``geographic``) or
+    :class:`~protocol.volumes.Route`, or a function of Alice's hello (to cut it at her
+    horizon, to put his windows on her epoch).  ``setups`` keeps compact-suite OT setups by
     id (the caller keeps one mapping per peer); ``keys`` are needed for the paper suite only.
+    ``separation``: Bob's own minima; a compact run uses the larger of his and Alice's (the
+    paper suite computes the crossing only and refuses volumes).
     """
 
     def __init__(
@@ -348,9 +459,11 @@ class Bob:
         suites: Sequence[Suite] = (Suite.COMPACT, Suite.PAPER),
         geographic: bool = False,
         limits: Limits = Limits(),
+        separation: Separation = NO_SEPARATION,
         insecure_for_tests: bool = False,
     ) -> None:
         self.source, self.keys, self.geographic = path, keys, geographic
+        self.separation = separation
         self.setups: MutableMapping[bytes, ChooserSetup] = {} if setups is None else setups
         self.suites = tuple(suites)
         self.limits, self.insecure = limits, insecure_for_tests
@@ -400,9 +513,11 @@ class Bob:
         if hello.suite is Suite.COMPACT:
             from .suite_compact import CompactBob
 
-            return CompactBob(hello, path, self.setups)
+            return CompactBob(hello, path, self.setups, self.separation)
         from .suite_paper import PaperBob
 
+        if hello.volumes != CROSSING:
+            raise RemoteProtocolError("the paper suite compares no volumes")
         if self.keys is None:
             raise LocalProtocolError("the paper suite needs Bob's keys")
         return PaperBob(hello, path, self.keys, insecure=self.insecure)

@@ -1,6 +1,7 @@
 """Comparing Bob's l-bit value with Alice's on XOR shares: radix-2^w leaves and an AND tree.
 
-For each compared value Bob holds an l-bit B and Alice one l-bit T per threshold; the result
+For each compared value (each with its own public l) Bob holds an l-bit B and Alice one l-bit
+T per threshold; the result
 is XOR shares of GT = [B > T] and EQ = [B = T] (CrypTFlow2's millionaires' protocol, Rathee et
 al., CCS 2020, algorithm 1, with Bob as the OT receiver so that one set of leaves serves every
 threshold of a value).
@@ -56,27 +57,37 @@ def digits(value: int, widths: Sequence[int]) -> list[int]:
 
 @dataclass(frozen=True, slots=True)
 class Shape:
-    """Public: l, digit widths, thresholds per value."""
+    """Public: per compared value its bit length l, its digit widths (most significant
+    first) and its number of thresholds."""
 
-    l: int
-    widths: tuple[int, ...]
-    thresholds: tuple[int, ...]  # per value
+    bits: tuple[int, ...]
+    digits: tuple[tuple[int, ...], ...]
+    thresholds: tuple[int, ...]
 
     @classmethod
-    def of(cls, l: int, w: int, thresholds: Sequence[int]) -> Shape:
+    def of(cls, l: int | Sequence[int], w: int, thresholds: Sequence[int]) -> Shape:
+        """``l``: one bit length for every value, or one per value."""
         if any(t < 1 for t in thresholds):
             raise LocalProtocolError("every value has at least one threshold")
-        return cls(l, tuple(digit_widths(l, w)), tuple(thresholds))
+        bits = (l,) * len(thresholds) if isinstance(l, int) else tuple(l)
+        if len(bits) != len(thresholds):
+            raise LocalProtocolError("one bit length per value")
+        widths = {b: tuple(digit_widths(b, w)) for b in set(bits)}
+        return cls(bits, tuple(widths[b] for b in bits), tuple(thresholds))
 
     @property
     def rots(self) -> int:
-        return self.l * len(self.thresholds)
+        return sum(self.bits)
 
     def correction_size(self) -> int:
         return packed_size([1] * self.rots)
 
     def _table_widths(self) -> list[int]:
-        return [(2 * t) << w for t in self.thresholds for w in self.widths]
+        return [
+            (2 * t) << w
+            for t, widths in zip(self.thresholds, self.digits, strict=True)
+            for w in widths
+        ]
 
     def table_size(self) -> int:
         return packed_size(self._table_widths())
@@ -87,13 +98,13 @@ def _label(value: int, digit: int, entry: int) -> bytes:
 
 
 class LeavesBob:
-    """Bob: one l-bit value per compared value."""
+    """Bob: one value of its l bits per compared value."""
 
     def __init__(self, shape: Shape, values: Sequence[int], rots: ChooserRots) -> None:
         if len(values) != len(shape.thresholds) or len(rots.keys) != shape.rots:
             raise LocalProtocolError("leaf inputs do not match the shape")
-        if any(not 0 <= v < 1 << shape.l for v in values):
-            raise LocalProtocolError("compared values must have l bits")
+        if any(not 0 <= v < 1 << l for v, l in zip(values, shape.bits, strict=True)):
+            raise LocalProtocolError("compared values must have their l bits")
         self.shape, self.values, self.rots = shape, list(values), rots
 
     def corrections(self) -> bytes:
@@ -101,8 +112,7 @@ class LeavesBob:
         first within a digit, digits most significant first)."""
         bits = []
         index = 0
-        for value in self.values:
-            widths = self.shape.widths
+        for value, widths in zip(self.values, self.shape.digits, strict=True):
             for digit, width in zip(digits(value, widths), widths, strict=True):
                 for i in range(width):
                     bits.append(((digit >> i) & 1) ^ self.rots.choices[index])
@@ -115,11 +125,11 @@ class LeavesBob:
         out: list[list[list[tuple[int, int]]]] = []
         index = 0
         field = iter(fields)
-        for v, (value, count) in enumerate(zip(self.values, self.shape.thresholds, strict=True)):
+        for v, (value, count, widths) in enumerate(
+            zip(self.values, self.shape.thresholds, self.shape.digits, strict=True)
+        ):
             per: list[list[tuple[int, int]]] = [[] for _ in range(count)]
-            for d, (digit, width) in enumerate(
-                zip(digits(value, self.shape.widths), self.shape.widths, strict=True)
-            ):
+            for d, (digit, width) in enumerate(zip(digits(value, widths), widths, strict=True)):
                 table = next(field)
                 keys = b"".join(self.rots.keys[index : index + width])
                 index += width
@@ -134,7 +144,7 @@ class LeavesBob:
 
 
 class LeavesAlice:
-    """Alice: per value one l-bit T per threshold."""
+    """Alice: per value one T of the value's l bits per threshold."""
 
     def __init__(
         self,
@@ -144,8 +154,8 @@ class LeavesAlice:
     ) -> None:
         if len(thresholds) != len(shape.thresholds) or len(rots.keys0) != shape.rots:
             raise LocalProtocolError("leaf inputs do not match the shape")
-        for ts, count in zip(thresholds, shape.thresholds, strict=True):
-            if len(ts) != count or any(not 0 <= t < 1 << shape.l for t in ts):
+        for ts, count, l in zip(thresholds, shape.thresholds, shape.bits, strict=True):
+            if len(ts) != count or any(not 0 <= t < 1 << l for t in ts):
                 raise LocalProtocolError("one l-bit value per threshold")
         self.shape, self.thresholds, self.rots = shape, [list(t) for t in thresholds], rots
 
@@ -156,12 +166,12 @@ class LeavesAlice:
         fields: list[int] = []
         shares: list[list[list[tuple[int, int]]]] = []
         index = 0
-        for v, ts in enumerate(self.thresholds):
+        for v, (ts, widths) in enumerate(zip(self.thresholds, shape.digits, strict=True)):
             count = len(ts)
             bits = 2 * count
             per: list[list[tuple[int, int]]] = [[] for _ in range(count)]
-            targets = [digits(t, shape.widths) for t in ts]
-            for d, width in enumerate(shape.widths):
+            targets = [digits(t, widths) for t in ts]
+            for d, width in enumerate(widths):
                 k0 = self.rots.keys0[index : index + width]
                 k1 = self.rots.keys1[index : index + width]
                 e = flips[index : index + width]
@@ -210,9 +220,9 @@ def comparison_circuit(shape: Shape, *, need_eq: bool = False) -> Circuit:
     ``need_eq``); inputs in :class:`LeavesBob`'s share order.  Benchmarks and tests use it to
     run the leaves and the tree on their own."""
     circuit = Circuit()
-    for count in shape.thresholds:
+    for count, widths in zip(shape.thresholds, shape.digits, strict=True):
         for _ in range(count):
-            nodes = [Node(circuit.input(), circuit.input()) for _ in shape.widths]
+            nodes = [Node(circuit.input(), circuit.input()) for _ in widths]
             root = build_tree(circuit, nodes, need_eq=need_eq)
             circuit.output(root.gt)
             if need_eq:

@@ -34,12 +34,12 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import secrets
-from collections.abc import MutableMapping, Sequence
+from collections.abc import MutableMapping
 
-from .compact_plan import Offer, Plan, make_plan
+from .compact_plan import Compared, Offer, Plan, Test, make_plan
 from .encoding import Reader
-from .errors import InputRangeError, LocalProtocolError, UnknownSetupError
-from .geometry import BobPath, Point, orient_coefficients, pad_path, projection_key
+from .errors import InputRangeError, LocalProtocolError, RemoteProtocolError, UnknownSetupError
+from .geometry import BobPath, orient_coefficients, projection_key
 from .gmw import Gmw
 from .grid import GridSpec
 from .intersection import AliceSide, BobSide, Kind, Limits, State
@@ -67,6 +67,17 @@ from .ot.setup import (
     chooser_setup,
 )
 from .products import ProductsAlice, ProductsBob
+from .volumes import (
+    CROSSING,
+    NO_SEPARATION,
+    Route,
+    Separation,
+    VolumeSpec,
+    pad_route,
+    read_separation,
+    slab_radius,
+    write_separation,
+)
 from .wire import NONCE_SIZE, Hello, MsgType, Suite, frame, unframe
 
 __all__ = ["CompactAlice", "CompactBob"]
@@ -99,20 +110,23 @@ class CompactAlice(AliceSide):
 
     def __init__(
         self,
-        path: Sequence[Point],
+        route: Route,
         grid: GridSpec,
         *,
         setup: HolderSetup | None,
         limits: Limits,
         horizon_m: int = 0,
+        volumes: VolumeSpec = CROSSING,
         digit_bits: int | None = None,
         block_bits: int = DEFAULT_BLOCK_BITS,
         ot_security: int = DEFAULT_SECURITY,
     ) -> None:
-        self.segments = len(path) - 1
+        self.segments = route.segments
         self.m = limits.padded(self.segments)
-        self.path = pad_path(path, self.m)
+        self.route = pad_route(route, self.m)
+        self.path = self.route.points
         self.grid, self.limits, self.horizon_m = grid, limits, horizon_m
+        self.volumes = volumes
         self.digit_bits = digit_bits or DEFAULT_DIGIT_BITS
         if not 1 <= self.digit_bits <= MAX_DIGIT_BITS:
             raise InputRangeError(f"digits of 1..{MAX_DIGIT_BITS} bits")
@@ -133,7 +147,14 @@ class CompactAlice(AliceSide):
             assert self._fresh is not None
             offer = dataclasses.replace(self._offer, points=self._fresh.message())
         hello = Hello(
-            Suite.COMPACT, 0, self.grid, self.m, self.horizon_m, self.nonce, offer.to_bytes()
+            Suite.COMPACT,
+            0,
+            self.grid,
+            self.m,
+            self.horizon_m,
+            self.nonce,
+            offer.to_bytes(),
+            self.volumes,
         )
         self.state = State.RUNNING
         return hello.to_bytes()
@@ -157,10 +178,11 @@ class CompactAlice(AliceSide):
         reader = Reader(body)
         self.n = self.limits.peer_size(reader.uint(2))
         bob_nonce = reader.take(NONCE_SIZE)
+        self.run_volumes = self._agree(read_separation(reader))
         if self._fresh is not None:
             self.setup = self._fresh.finish(reader.take(chooser_message_size(self._fresh.blocks)))
         assert self.setup is not None
-        self.plan = plan = make_plan(self.m, self.n, self.grid, self.digit_bits)
+        self.plan = plan = make_plan(self.m, self.n, self.grid, self.digit_bits, self.run_volumes)
         nonce = _run_nonce(self.nonce, bob_nonce, self.setup.setup_id)
         extension = reader.take(correction_size(self.setup.blocks, plan.total_rots))
         self.guard_bytes = check_bytes(self.setup.blocks, plan.total_rots)
@@ -179,8 +201,25 @@ class CompactAlice(AliceSide):
         self._shares = [(s + c) % modulus for s, c in zip(shares, constants, strict=True)]
         return frame(MsgType.PRODUCTS, 3, message)
 
+    def _agree(self, bob: Separation) -> VolumeSpec:
+        """The run's volumes: the larger separation of both, which Alice's box must leave
+        room for (Bob's path is cut to the box: anything of his within r of hers must be
+        inside it)."""
+        separation = self.volumes.separation.widest(bob)
+        r = separation.horizontal
+        if r > self.limits.max_separation:
+            raise RemoteProtocolError(f"peer asks for a separation of {r} grid units")
+        if r:
+            room = self.grid.range - max(abs(c) for p in self.path for c in p)
+            if r >= room:
+                raise InputRangeError(
+                    f"separation {r} needs {r + 1} grid units around the path, the box leaves "
+                    f"{room} (a larger box)"
+                )
+        return dataclasses.replace(self.volumes, separation=separation)
+
     def _multipliers(self) -> tuple[list[int], list[int]]:
-        """Alice's coefficient per product and constant per value (Bob's shifts folded in)."""
+        """Alice's coefficient per product and constant per form (Bob's shifts folded in)."""
         r = self.grid.range
         a = self.path
         orient_rows = [orient_coefficients(a[i], a[i + 1]) for i in range(self.m)]
@@ -196,21 +235,58 @@ class CompactAlice(AliceSide):
                 ex, ey, off, _ = proj_rows[row]
                 multipliers += [ex, ey]
                 constants.append(off - (ex + ey) * r)
-            else:
+            elif kind is Kind.O3:
                 ax, ay = a[row]
                 multipliers += [ay, -ax]
                 constants.append(-2 * r * (ay - ax))
+            elif kind is Kind.T3:  # A_j . d_k (Bob adds -B_k . d_k)
+                ax, ay = a[row]
+                multipliers += [ax, ay]
+                constants.append(-2 * r * (ax + ay))
+            else:  # D: |A_j|^2 - 2 A_j . B_k (Bob adds |B_k|^2)
+                ax, ay = a[row]
+                multipliers += [-2 * ax, -2 * ay]
+                constants.append(ax * ax + ay * ay + 2 * r * (ax + ay))
         self._t_max = [t for *_, t in proj_rows]
         return multipliers, constants
 
+    def _share(self, c: Compared) -> tuple[int, list[int]]:
+        """Alice's share of one compared value and her thresholds for it."""
+        if c.from_form:
+            return self._shares[c.index], self._form_thresholds(c)
+        volumes = self.run_volumes
+        i, _ = self.plan.layout.pairs()[c.index]
+        v = volumes.separation.vertical
+        if c.test in (Test.BAND_LOW, Test.BAND_HIGH):
+            low, high = volumes.clamp_band(self.route.band(i))
+            return (v - low if c.test is Test.BAND_LOW else high + v), [0]
+        low, high = volumes.clamp_window(self.route.window(i))
+        return (-low if c.test is Test.TIME_LOW else high), [0]
+
+    def _form_thresholds(self, c: Compared) -> list[int]:
+        _, row, _ = self.plan.layout.values[c.index]
+        if c.test is Test.T:
+            return [0, self._t_max[row] + 1]
+        if c.test is Test.O1:
+            if c.thresholds == 1:
+                return [1]
+            a, b = self.path[row], self.path[row + 1]
+            radius = slab_radius(a, b, self.run_volumes.separation.horizontal)
+            return [1, -radius, radius + 1]
+        if c.test is Test.O3:
+            return [1]
+        if c.test is Test.D:
+            return [self.run_volumes.separation.horizontal**2 + 1]
+        return [0]  # O3_LOW, O3_HIGH, T3, T3_HIGH: Bob's shifts hold his own bounds
+
     def _thresholds(self) -> tuple[list[list[int]], list[list[int]]]:
         """Per value and threshold: the l-bit comparison target and Alice's high bit."""
-        l = self.plan.l
-        top, low = 1 << (l + 1), (1 << l) - 1
         targets: list[list[int]] = []
         highs: list[list[int]] = []
-        for (kind, row, _), share in zip(self.plan.layout.values, self._shares, strict=True):
-            thetas = [0, self._t_max[row] + 1] if kind is Kind.T else [1]
+        for c in self.plan.compared:
+            share, thetas = self._share(c)
+            l = c.bits
+            top, low = 1 << (l + 1), (1 << l) - 1
             shifted = [(share - theta + (1 << l)) % top for theta in thetas]
             targets.append([low - (s & low) for s in shifted])
             highs.append([s >> l for s in shifted])
@@ -250,12 +326,19 @@ class CompactBob(BobSide):
         hello: Hello,
         path: BobPath,
         setups: MutableMapping[bytes, ChooserSetup],
+        separation: Separation = NO_SEPARATION,
     ) -> None:
         n = path.segments
         self.hello, self.path, self.n, self.m = hello, path, n, hello.m
         self.grid = hello.grid
         offer = Offer.from_bytes(hello.offer)
-        self.plan = make_plan(self.m, n, self.grid, offer.digit_bits)
+        volumes = hello.volumes
+        self.run_volumes = dataclasses.replace(
+            volumes, separation=volumes.separation.widest(separation)
+        )
+        if self.run_volumes.separation.horizontal >= self.grid.range:
+            raise RemoteProtocolError("a separation as wide as the box")
+        self.plan = make_plan(self.m, n, self.grid, offer.digit_bits, self.run_volumes)
         setup_reply = b""
         if offer.setup_id is not None:
             found = setups.get(offer.setup_id)
@@ -278,7 +361,12 @@ class CompactBob(BobSide):
         self._reply = frame(
             MsgType.OFFER,
             2,
-            n.to_bytes(2, "big") + nonce_b + setup_reply + extension + self.products.corrections(),
+            n.to_bytes(2, "big")
+            + nonce_b
+            + write_separation(separation)
+            + setup_reply
+            + extension
+            + self.products.corrections(),
         )
         self.state = State.RUNNING
         self.step = 3
@@ -307,19 +395,61 @@ class CompactBob(BobSide):
         self.step += 2
         return reply
 
+    def _form_constants(self) -> list[int]:
+        """Bob's own term of each form: K_k (O3), -B_k . d_k (T3), |B_k|^2 (D)."""
+        points = self.path.points
+        out = []
+        for kind, _, k in self.plan.layout.values:
+            if kind is Kind.O3:
+                out.append(self.path.line(k)[2])
+            elif kind is Kind.T3:
+                dx, dy, _ = self.path.line(k)
+                out.append(-(points[k][0] * dx + points[k][1] * dy))
+            elif kind is Kind.D:
+                out.append(points[k][0] ** 2 + points[k][1] ** 2)
+            else:
+                out.append(0)
+        return out
+
+    def _segment_bounds(self, k: int) -> tuple[int, int]:
+        """(R'_k, L_k) of Bob's segment k; a link's (-1, 0) keeps its slab empty."""
+        if k in self.path.links:
+            return -1, 0
+        a, b = self.path.points[k], self.path.points[k + 1]
+        r = self.run_volumes.separation.horizontal
+        return slab_radius(a, b, r), (b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2
+
+    def _value(self, c: Compared, forms: list[int]) -> int:
+        """Bob's share of one compared value: a form's with his shift, or his pair input."""
+        layout = self.plan.layout
+        if c.from_form:
+            k = layout.values[c.index][2]
+            if c.test is Test.O3_LOW:
+                return forms[c.index] + self._segment_bounds(k)[0]
+            if c.test is Test.O3_HIGH:
+                return forms[c.index] - self._segment_bounds(k)[0] - 1
+            if c.test is Test.T3_HIGH:
+                return forms[c.index] - self._segment_bounds(k)[1] - 1
+            return forms[c.index]
+        volumes = self.run_volumes
+        _, k = layout.pairs()[c.index]
+        if c.test in (Test.BAND_LOW, Test.BAND_HIGH):
+            band = volumes.clamp_band(None if self.path.bands is None else self.path.bands[k])
+            return band[1] if c.test is Test.BAND_LOW else -band[0]
+        window = volumes.clamp_window(None if self.path.windows is None else self.path.windows[k])
+        return window[1] if c.test is Test.TIME_LOW else -window[0]
+
     # message 3 -> 4
     def _on_products(self, body: bytes) -> bytes:
         shares = self.products.shares(body)
-        l = self.plan.l
-        top = 1 << (l + 1)
-        constants = [
-            self.path.line(k)[2] if kind is Kind.O3 else 0 for kind, _, k in self.plan.layout.values
-        ]
-        values = [(s + c) % top for s, c in zip(shares, constants, strict=True)]
-        self._highs = [v >> l for v in values]
-        self.leaves = LeavesBob(
-            self.plan.leaves, [v & ((1 << l) - 1) for v in values], self._leaf_rots
-        )
+        forms = [s + c for s, c in zip(shares, self._form_constants(), strict=True)]
+        values = []
+        self._highs = []
+        for c in self.plan.compared:
+            value = self._value(c, forms) % (1 << (c.bits + 1))
+            self._highs.append(value >> c.bits)
+            values.append(value & ((1 << c.bits) - 1))
+        self.leaves = LeavesBob(self.plan.leaves, values, self._leaf_rots)
         return frame(MsgType.DIGITS, 4, self.leaves.corrections())
 
     # message 5 -> 6

@@ -53,6 +53,7 @@ from .intersection import (
     Layout,
     Limits,
     State,
+    Wires,
 )
 from .paillier import PaillierCiphertext, PaillierPublicKey
 from .params import check_kappa
@@ -121,16 +122,15 @@ def make_circuit(layout: Layout, packing: Packing) -> tuple[Circuit, list[int]]:
     """The path circuit on two comparison shares per value (packing order), and the input
     order: the circuit's input k is threshold k % 2 of packing value k // 2."""
     circuit = Circuit()
-    orient: list[Orient] = [Orient(-1, -1)] * len(layout.values)
-    proj: list[Proj] = [Proj(-1, -1)] * len(layout.values)
+    wires = [Wires()] * len(layout.values)
     for kind, row, col in packing.values:
         ge0, ge1 = circuit.input(), circuit.input()
         position = layout.position(kind, row, col)
         if kind is Kind.T:
-            proj[position] = Proj(circuit.not_(ge0), ge1)
+            wires[position] = Wires(proj=Proj(circuit.not_(ge0), ge1))
         else:  # ge0 = [o >= 0], ge1 = [o >= 1]
-            orient[position] = Orient(ge1, circuit.xor(ge0, ge1))
-    layout.outputs(circuit, orient, proj)
+            wires[position] = Wires(orient=Orient(ge1, circuit.xor(ge0, ge1)))
+    layout.outputs(circuit, wires)
     return circuit, [2] * len(packing.values)
 
 

@@ -20,9 +20,10 @@ from dataclasses import dataclass
 from .encoding import Reader
 from .errors import LocalProtocolError, RemoteProtocolError
 from .grid import GridSpec
+from .volumes import CROSSING, VolumeSpec
 
 MAGIC = b"PD"
-VERSION = 2
+VERSION = 3
 HEADER_SIZE = 8
 MAX_BODY = (1 << 24) - 1
 NONCE_SIZE = 16
@@ -105,7 +106,8 @@ def take_blob(reader: Reader) -> bytes:
 @dataclass(frozen=True, slots=True)
 class Hello:
     """Message 1.  ``offer`` is the suite's own part (the OT setup, see the suite modules);
-    ``horizon_m`` asks Bob to compare only his next ``horizon_m`` metres of path (0: all)."""
+    ``horizon_m`` asks Bob to compare only his next ``horizon_m`` metres of path (0: all);
+    ``volumes`` are the run's public volume parameters (all zero: the crossing test)."""
 
     suite: Suite
     kappa: int
@@ -114,6 +116,7 @@ class Hello:
     horizon_m: int
     nonce: bytes
     offer: bytes = b""
+    volumes: VolumeSpec = CROSSING
 
     def to_bytes(self) -> bytes:
         if len(self.nonce) != NONCE_SIZE:
@@ -123,6 +126,7 @@ class Hello:
             + self.grid.to_bytes()
             + self.m.to_bytes(2, "big")
             + self.horizon_m.to_bytes(4, "big")
+            + self.volumes.to_bytes()
             + self.nonce
             + put_blob(self.offer)
         )
@@ -140,7 +144,8 @@ class Hello:
         grid = GridSpec.from_bytes(reader.take(GridSpec.SIZE))
         m = reader.uint(2)
         horizon = reader.uint(4)
+        volumes = VolumeSpec.read(reader)
         nonce = reader.take(NONCE_SIZE)
         offer = take_blob(reader)
         reader.finish()
-        return cls(suite, kappa, grid, m, horizon, nonce, offer)
+        return cls(suite, kappa, grid, m, horizon, nonce, offer, volumes)

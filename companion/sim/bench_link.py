@@ -85,7 +85,7 @@ def bench_link(
     _say(progress, f"generating keys ({suite})")
     party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
     grid = GridSpec(GridKind.PLANE, range_)
-    paths = Case(random_path(size, range_), random_path(size, range_), grid)
+    paths = Case.of(random_path(size, range_), random_path(size, range_), grid)
     rows = []
     for name in profiles:
         link = PROFILES[name]

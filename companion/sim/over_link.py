@@ -21,7 +21,6 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from protocol.geometry import path_hits
 from protocol.grid import GridSpec
 from protocol.intersection import Limits
 from protocol.tools.compare import Case, Party, compare
@@ -97,7 +96,7 @@ async def _run(
     stats = (a.stats, b.stats)
     return {
         "hits": report.hits,
-        "plain_hits": path_hits(case.alice, case.bob_on_grid),
+        "plain_hits": case.plain_hits(),
         "bytes_alice_to_bob": report.bytes_sent,
         "bytes_bob_to_alice": bob_report.bytes_sent,
         "auth_bytes": report.auth_bytes_sent + bob_report.auth_bytes_sent,
@@ -221,7 +220,7 @@ def radio_demo(profiles: Sequence[str] = ("eu868-sf7", "us915-sf7"), loss: float
     from protocol.tools.demo import ALICE_MISSION, BOB_MISSION, HOME_LAT, HOME_LON
 
     grid = GridSpec.geo(HOME_LAT, HOME_LON, radius_m=2000)
-    case = Case(grid.project_path(ALICE_MISSION), BOB_MISSION, grid, bob_geographic=True)
+    case = Case.of(grid.project_path(ALICE_MISSION), BOB_MISSION, grid, bob_geographic=True)
     party = Party.generate(Suite.COMPACT)
     print(f"\nThe same comparison over the simulated LoRa link ({loss:.0%} frame loss, same seed):")
     print("\n| profile | correct | frames | retransmitted | airtime | simulated time |")

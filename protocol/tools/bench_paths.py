@@ -17,11 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from .. import keyproof
-from ..geometry import Point, path_hits
+from ..geometry import Point
 from ..grid import GridKind, GridSpec
 from ..intersection import Alice, Bob
 from ..ot import check
 from ..ot.setup import DEFAULT_SECURITY
+from ..volumes import NO_SEPARATION, Separation, VolumeSpec
 from ..wire import Suite
 from .compare import Case, Party, describe_once, params_of, run_case
 from .loopback import run_paths
@@ -113,10 +114,15 @@ def _summary(results: list[dict[str, Any]], pairs: list[int]) -> dict[str, Any]:
     }
 
 
-def bench_paper(data: Path, suite: str = "compact", progress: bool = True) -> dict[str, Any]:
+def bench_paper(
+    data: Path,
+    suite: str = "compact",
+    progress: bool = True,
+    separation: Separation = NO_SEPARATION,
+) -> dict[str, Any]:
     """The paper's 30 single-segment pairs and its 5 route tests, from the directory ``data``
-    (:mod:`.paper_data`)."""
-    paper = load_paper_data(data)
+    (:mod:`.paper_data`), with ``separation`` (none: the paper's crossing test)."""
+    paper = load_paper_data(data, separation)
     _say(progress, f"generating keys ({suite})")
     party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
     cases = paper.pairs
@@ -131,13 +137,14 @@ def bench_paper(data: Path, suite: str = "compact", progress: bool = True) -> di
         _say(progress, f"route {route.number}")
         result = _run(route.case, party)
         result["route"] = route.number
-        result["segments"] = (len(route.case.alice) - 1, len(route.case.bob) - 1)
+        result["segments"] = (route.case.alice.segments, route.case.bob.segments)
         result["hit_indices"] = [i for i, h in enumerate(result["hits"]) if h]
         result["expected_any"] = route.expected_any
         routes.append(result)
     span = paper.routes[0].case.grid.range if paper.routes else 1
     return {
         "suite": suite,
+        "separation": separation.horizontal,
         "data": str(paper.directory),
         "params": params_of(party, cases[0].grid),
         "route_grid_range": span,
@@ -150,6 +157,11 @@ def bench_paper(data: Path, suite: str = "compact", progress: bool = True) -> di
         "paper_published_quoted": PAPER_PUBLISHED,
         "paper_code_quoted": PAPER_CODE_QUOTED,  # from the field notes, not measured here
     }
+
+
+def _separation(result: dict[str, Any]) -> str:
+    r = result.get("separation", 0)
+    return f"separation {r} grid units" if r else "the crossing test"
 
 
 def _over(added: float, total: float) -> str:
@@ -177,7 +189,7 @@ def format_paper(result: dict[str, Any]) -> str:
         ]
     )
     lines = [
-        f"Paper benchmark, suite {result['suite']} ({p['scheme']}), l = "
+        f"Paper benchmark, suite {result['suite']} ({p['scheme']}), {_separation(result)}, l = "
         f"{p['comparison_bits']} bits (range +-{p['grid_range']}); once per pair of drones: "
         f"{describe_once(p)}.",
         "",
@@ -205,7 +217,7 @@ def format_paper(result: dict[str, Any]) -> str:
         f"Routes (grid range +-{result['route_grid_range']}, "
         f"l = {result['route_comparison_bits']}; single run per route, not medians):",
         "",
-        "| route | m x n | hit segments | plaintext | expected any | bytes "
+        "| route | m x n | hit segments | plaintext | expected any (crossing) | bytes "
         "| Alice CPU s | Bob CPU s |",
         "|---:|---|---|---|---|---:|---:|---:|",
     ]
@@ -231,7 +243,7 @@ def random_pairs(count: int = 30, range_: int = 99) -> list[Case]:
     """``count`` random single-segment pairs in +-``range_``: the shape of the paper's
     benchmark pairs, for a benchmark run without the paper's files."""
     grid = GridSpec(GridKind.PLANE, range_)
-    return [Case(random_path(1, range_), random_path(1, range_), grid) for _ in range(count)]
+    return [Case.of(random_path(1, range_), random_path(1, range_), grid) for _ in range(count)]
 
 
 def bench_scaling(
@@ -240,12 +252,16 @@ def bench_scaling(
     range_: int = 99,
     progress: bool = True,
     repeat: int = 3,
+    separation: Separation = NO_SEPARATION,
 ) -> dict[str, Any]:
     """Random paths with n = m segments, coordinates in [-range, range]: ``repeat`` cases per
-    size (bytes depend on the sizes alone; CPU as medians)."""
+    size (bytes depend on the sizes alone; CPU as medians); with ``separation`` the grid
+    leaves room for it around the paths."""
     _say(progress, f"generating keys ({suite})")
     party = Party.generate(Suite.COMPACT if suite == "compact" else Suite.PAPER)
-    grid = GridSpec(GridKind.PLANE, range_)
+    room = separation.horizontal + 1 if separation.horizontal else 0
+    grid = GridSpec(GridKind.PLANE, range_ + room)
+    volumes = VolumeSpec(separation)
     once = party.once
     setup_bytes = int(
         once.get("setup_bytes_alice_to_bob", 0) + once.get("setup_bytes_bob_to_alice", 0)
@@ -255,7 +271,9 @@ def bench_scaling(
         results = []
         for k in range(repeat):
             _say(progress, f"{size} x {size} ({k + 1}/{repeat})")
-            case = Case(random_path(size, range_), random_path(size, range_), grid)
+            case = Case.of(
+                random_path(size, range_), random_path(size, range_), grid, volumes=volumes
+            )
             results.append(_run(case, party))
         r = results[-1]
         pairs = size * size
@@ -280,14 +298,19 @@ def bench_scaling(
                 ),
             }
         )
-    return {"suite": suite, "params": params_of(party, grid), "rows": rows}
+    return {
+        "suite": suite,
+        "separation": separation.horizontal,
+        "params": params_of(party, grid),
+        "rows": rows,
+    }
 
 
 def format_scaling(result: dict[str, Any]) -> str:
     p = result["params"]
     lines = [
-        f"Scaling, suite {result['suite']} ({p['scheme']}), random paths in "
-        f"[-{p['grid_range']}, {p['grid_range']}]^2, l = {p['comparison_bits']} bits; once per "
+        f"Scaling, suite {result['suite']} ({p['scheme']}), random paths in a grid of range "
+        f"+-{p['grid_range']}, {_separation(result)}, l = {p['comparison_bits']} bits; once per "
         f"pair of drones: {describe_once(p)}.  Bytes are fixed by the sizes (padded); CPU is "
         "the median of the runs.",
         "",
@@ -316,7 +339,7 @@ def bench_design(size: int = 8, range_: int = 99, progress: bool = True) -> dict
     default), and the paper suite on the same paths.  Real bytes and CPU of one run each;
     the one-time OT setup (made once per variant) in its own columns."""
     grid = GridSpec(GridKind.PLANE, range_)
-    case = Case(random_path(size, range_), random_path(size, range_), grid)
+    case = Case.of(random_path(size, range_), random_path(size, range_), grid)
     variants: list[tuple[str, int, int, int]] = [
         ("compact", 12, w, DEFAULT_SECURITY) for w in (2, 3, 4, 5, 6)
     ]
@@ -348,7 +371,7 @@ def bench_design(size: int = 8, range_: int = 99, progress: bool = True) -> dict
                 "ot_block_bits": blocks,
                 "ot_security": security,
                 "digit_bits": digits,
-                "correct": alice.hits == path_hits(case.alice, case.bob),
+                "correct": alice.hits == case.plain_hits(),
                 "bytes_total": t.bytes_alice_to_bob + t.bytes_bob_to_alice,
                 "setup_bytes": setup_bytes,
                 "setup_cpu_s": sum(v for k, v in party.once.items() if "cpu" in k),

@@ -9,6 +9,7 @@ CPU seconds are each party's own steps.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..geometry import Point, path_hits
+from ..geometry import Point
 from ..grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
 from ..intersection import Alice, Bob, BobKeys, Limits
 from ..ot.setup import (
@@ -27,8 +28,9 @@ from ..ot.setup import (
     describe,
     split_blocks,
 )
+from ..volumes import CROSSING, NO_SEPARATION, Route, Separation, VolumeSpec, route_hits
 from ..wire import Suite
-from .formats import InputFormatError, parse_paper_text, read_text
+from .formats import InputFormatError, parse_paper_text, read_text, route_of
 from .loopback import run_ot_setup, run_paths
 
 SUITES = {"compact": Suite.COMPACT, "paper": Suite.PAPER}
@@ -37,16 +39,34 @@ SUITES = {"compact": Suite.COMPACT, "paper": Suite.PAPER}
 @dataclass(frozen=True)
 class Case:
     """One comparison.  With ``bob_geographic`` Bob's path is WGS84 (degE7) and Bob projects
-    it himself on the grid Alice's hello announces, as a drone does."""
+    it himself on the grid Alice's hello announces, as a drone does.  ``volumes`` are Alice's
+    (her separation, the altitude and time ranges), ``bob_separation`` Bob's own minima."""
 
-    alice: tuple[Point, ...]
-    bob: tuple[Point, ...]
+    alice: Route
+    bob: Route
     grid: GridSpec
     bob_geographic: bool = False
+    volumes: VolumeSpec = CROSSING
+    bob_separation: Separation = NO_SEPARATION
+
+    @classmethod
+    def of(cls, alice: Sequence[Point], bob: Sequence[Point], grid: GridSpec, **more: Any) -> Case:
+        """A case of two plain paths (no bands, no windows)."""
+        return cls(Route(tuple(alice)), Route(tuple(bob)), grid, **more)
 
     @property
-    def bob_on_grid(self) -> tuple[Point, ...]:
-        return self.grid.project_path(self.bob) if self.bob_geographic else self.bob
+    def bob_on_grid(self) -> Route:
+        if not self.bob_geographic:
+            return self.bob
+        return dataclasses.replace(self.bob, points=self.grid.project_path(self.bob.points))
+
+    def plain_hits(self) -> list[bool]:
+        """The plaintext predicate on what the run compares (the larger separation, bands
+        and windows clamped to the public ranges): what the answer must be."""
+        run = dataclasses.replace(
+            self.volumes, separation=self.volumes.separation.widest(self.bob_separation)
+        )
+        return route_hits(run.clamp(self.alice), run.clamp(self.bob_on_grid), run.separation)
 
     def machines(self, party: Party, limits: Limits | None = None) -> tuple[Alice, Bob]:
         limits = limits or Limits()
@@ -57,6 +77,7 @@ class Case:
                 suite=party.suite,
                 setup=party.setup,
                 limits=limits,
+                volumes=self.volumes,
                 trusted_keys=True,  # both parties are this process's
             ),
             Bob(
@@ -65,6 +86,7 @@ class Case:
                 setups=party.setups,
                 geographic=self.bob_geographic,
                 limits=limits,
+                separation=self.bob_separation,
             ),
         )
 
@@ -95,10 +117,14 @@ def load_cases(
     resolution_mm: int = DEFAULT_RESOLUTION_MM,
     radius_m: float = DEFAULT_RADIUS_M,
     read_mission: MissionReader | None = None,
+    separation: Separation = NO_SEPARATION,
+    time_tolerance: int = 0,
 ) -> list[Case]:
     """Pair line k of ALICE with line k of BOB (paper format) or two mission files (one
     case, their flown paths as ``read_mission`` gives them; the grid is centred on Alice's
-    first point and wide enough for both paths)."""
+    first point and wide enough for both paths).  Both parties use ``separation``; vertices
+    with altitudes (times) make the runs compare bands (windows, each widened by
+    ``time_tolerance`` seconds), the ranges the files' extent."""
     a_text, b_text = read_text(alice_file), read_text(bob_file)
     a_plan, b_plan = is_mission_file(alice_file, a_text), is_mission_file(bob_file, b_text)
     if a_plan != b_plan:
@@ -121,23 +147,37 @@ def load_cases(
             while not grid_holds(lat, lon, radius, a_geo + b_geo):
                 radius *= 2
             grid = GridSpec.geo(lat, lon, resolution_mm=resolution_mm, radius_m=radius)
-        return [Case(grid.project_path(a_geo), tuple(b_geo), grid, bob_geographic=True)]
-    a_cases = parse_paper_text(a_text, str(alice_file))
-    b_cases = parse_paper_text(b_text, str(bob_file))
-    if len(a_cases) != len(b_cases):
+        return [Case.of(grid.project_path(a_geo), b_geo, grid, bob_geographic=True)]
+    a_lines = parse_paper_text(a_text, str(alice_file))
+    b_lines = parse_paper_text(b_text, str(bob_file))
+    if len(a_lines) != len(b_lines):
         raise InputFormatError(
-            f"{alice_file} has {len(a_cases)} paths but {bob_file} has {len(b_cases)}"
+            f"{alice_file} has {len(a_lines)} paths but {bob_file} has {len(b_lines)}"
         )
+    pairs = [
+        (route_of(a, time_tolerance), route_of(b, time_tolerance))
+        for a, b in zip(a_lines, b_lines, strict=True)
+    ]
+    r = separation.horizontal
     if range_ is None:
-        # The range is public: both operators agree on it.  Here: the files' extent.
+        # The range is public: both operators agree on it.  Here: the files' extent, and room
+        # for the separation around Alice's path (Bob's is cut to the box).
         range_ = max(
-            max(abs(c) for p in a + b for c in p) for a, b in zip(a_cases, b_cases, strict=True)
+            max(abs(c) for p in a.points + b.points for c in p) + (r + 1 if r else 0)
+            for a, b in pairs
         )
     grid = GridSpec(GridKind.PLANE, max(1, range_))
-    for a, b in zip(a_cases, b_cases, strict=True):
-        grid.check_points(a)
-        grid.check_points(b)
-    return [Case(a, b, grid) for a, b in zip(a_cases, b_cases, strict=True)]
+    for a, b in pairs:
+        grid.check_points(a.points)
+        grid.check_points(b.points)
+    bands = [x for a, b in pairs for route in (a, b) for x in route.bands or ()]
+    windows = [x for a, b in pairs for route in (a, b) for x in route.windows or ()]
+    volumes = VolumeSpec(
+        separation,
+        z_range=max((max(abs(lo), abs(hi)) for lo, hi in bands), default=0) or int(bool(bands)),
+        t_range=max((hi for _, hi in windows), default=0) or int(bool(windows)),
+    )
+    return [Case(a, b, grid, volumes=volumes, bob_separation=separation) for a, b in pairs]
 
 
 @dataclass
@@ -178,7 +218,7 @@ def run_case(case: Case, party: Party, limits: Limits | None = None) -> dict[str
     return {
         "guard_bytes": alice.guard_bytes,
         "hits": alice.hits,
-        "plain_hits": path_hits(case.alice, case.bob_on_grid),
+        "plain_hits": case.plain_hits(),
         "bytes_alice_to_bob": t.bytes_alice_to_bob,
         "bytes_bob_to_alice": t.bytes_bob_to_alice,
         "messages": t.messages,
@@ -217,17 +257,37 @@ def compare(
     progress: bool = False,
     run: Callable[[Case, Party], dict[str, Any]] = run_case,
     read_mission: MissionReader | None = None,
+    separation: Separation = NO_SEPARATION,
+    time_tolerance: int = 0,
 ) -> dict[str, Any]:
     """Everything ``compare --json`` prints; ``run`` carries one case (in memory by default,
     the companion passes one that goes through the simulated radio)."""
-    cases = load_cases(alice_file, bob_file, range_=range_, read_mission=read_mission)
+    cases = load_cases(
+        alice_file,
+        bob_file,
+        range_=range_,
+        read_mission=read_mission,
+        separation=separation,
+        time_tolerance=time_tolerance,
+    )
     party = Party.generate(SUITES[suite_name])
     results = []
     for number, case in enumerate(cases, start=1):
         if progress:
             print(f"  ... case {number}/{len(cases)}", flush=True, file=sys.stderr)
         results.append(run(case, party))
-    return {"suite": suite_name, "params": params_of(party, cases[0].grid), "cases": results}
+    volumes = cases[0].volumes
+    return {
+        "suite": suite_name,
+        "params": params_of(party, cases[0].grid),
+        "volumes": {
+            "separation": volumes.separation.horizontal,
+            "vertical_separation": volumes.separation.vertical,
+            "altitude_range": volumes.z_range,
+            "time_range_s": volumes.t_range,
+        },
+        "cases": results,
+    }
 
 
 def describe_once(params: dict[str, Any]) -> str:
@@ -241,9 +301,18 @@ def describe_once(params: dict[str, Any]) -> str:
 
 def format_compare(result: dict[str, Any]) -> str:
     p = result["params"]
+    v = result.get("volumes", {})
+    volumes = (
+        f"; separation {v['separation']}, vertical {v['vertical_separation']} (grid units)"
+        + (", altitudes" if v["altitude_range"] else "")
+        + (", times" if v["time_range_s"] else "")
+        if v and (v["separation"] or v["altitude_range"] or v["time_range_s"])
+        else "; the crossing test"
+    )
     lines = [
         f"suite {result['suite']} ({p['scheme']}), grid range +-{p['grid_range']} "
-        f"-> l = {p['comparison_bits']} bits; once per pair of drones: {describe_once(p)}",
+        f"-> l = {p['comparison_bits']} bits{volumes}; once per pair of drones: "
+        f"{describe_once(p)}",
         "",
         "| case | hits (Alice's segments) | plaintext | A->B bytes | B->A bytes | msgs "
         "| round trips | Alice CPU s | Bob CPU s |",

@@ -11,11 +11,13 @@ makes its own data of the same shape where it needs no more than the shape (the 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..grid import GridKind, GridSpec
+from ..volumes import NO_SEPARATION, Separation
 from .compare import Case, load_cases
 from .formats import InputFormatError, read_text
 
@@ -76,11 +78,12 @@ def _expected_any(path: Path) -> dict[int, bool]:
     return expected
 
 
-def load_paper_data(directory: str | Path) -> PaperData:
+def load_paper_data(directory: str | Path, separation: Separation = NO_SEPARATION) -> PaperData:
     """The pairs (each on the grid of the pair files' extent) and the route tests that are
-    present (all on one grid, the routes' common extent)."""
+    present (all on one grid, the routes' common extent), compared with ``separation`` (the
+    grids leave room for it)."""
     directory = check_directory(Path(directory))
-    pairs = load_cases(*(directory / name for name in PAIR_FILES))
+    pairs = load_cases(*(directory / name for name in PAIR_FILES), separation=separation)
     expected = (
         _expected_any(directory / EXPECTED_FILE) if (directory / EXPECTED_FILE).exists() else {}
     )
@@ -92,8 +95,8 @@ def load_paper_data(directory: str | Path) -> PaperData:
                 raise InputFormatError(
                     f"{directory}: route {k} needs both {own.name} and {crypt.name}"
                 )
-            found.append((k, load_cases(own, crypt)[0]))
+            found.append((k, load_cases(own, crypt, separation=separation)[0]))
     span = max((case.grid.range for _, case in found), default=1)
     grid = GridSpec(GridKind.PLANE, span)
-    routes = [Route(k, Case(c.alice, c.bob, grid), expected.get(k)) for k, c in found]
+    routes = [Route(k, dataclasses.replace(c, grid=grid), expected.get(k)) for k, c in found]
     return PaperData(directory, pairs, routes)

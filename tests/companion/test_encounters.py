@@ -194,7 +194,7 @@ def test_box_radius_doubles_until_the_path_fits() -> None:
 def test_estimate_matches_the_simulated_radio() -> None:
     """The fail-safe's estimate of a run against the link's own accounting (virtual time)."""
     grid = GridSpec(GridKind.PLANE, 2000)
-    case = Case(((0, 0), (500, 20), (900, -40)), ((400, -300), (420, 300), (800, 600)), grid)
+    case = Case.of(((0, 0), (500, 20), (900, -40)), ((400, -300), (420, 300), (800, 600)), grid)
     party = Party.generate(Suite.COMPACT)
     for profile in ("us915-sf7", "eu868-sf7"):
         measured = [

@@ -27,9 +27,9 @@ from .link.helpers import pair
 
 HARSH = Impairments(loss=0.3, corrupt=0.05, duplicate=0.02, reorder=0.1)
 GRID = GridSpec(GridKind.PLANE, 40)
-CROSSING = Case(((-30, 0), (0, 5), (30, 0)), ((0, -30), (1, 30)), GRID)
-COLLINEAR = Case(((-30, -30), (30, 30)), ((0, 0), (40, 40)), GRID)
-APART = Case(((-30, -30), (-20, -30), (-10, -25)), ((10, 10), (20, 30)), GRID)
+CROSSING = Case.of(((-30, 0), (0, 5), (30, 0)), ((0, -30), (1, 30)), GRID)
+COLLINEAR = Case.of(((-30, -30), (30, 30)), ((0, 0), (40, 40)), GRID)
+APART = Case.of(((-30, -30), (-20, -30), (-10, -25)), ((10, 10), (20, 30)), GRID)
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +50,9 @@ def test_correct_under_30_percent_loss_with_corruption_and_reordering(
     impaired = {"corrupted": 0, "reordered": 0, "frames_retransmitted": 0}
     for seed in range(11, 19):  # a run is a few dozen frames: several seeds see every fault
         result = link_case(case, compact, PROFILES[name], HARSH, seed=seed)
-        assert result["hits"] == path_hits(case.alice, case.bob) == result["plain_hits"]
+        assert (
+            result["hits"] == path_hits(case.alice.points, case.bob.points) == result["plain_hits"]
+        )
         assert result["messages"] == run_case(case, compact)["messages"]  # as without the radio
         impaired["frames_retransmitted"] += result["frames_retransmitted"]
         for key in ("corrupted", "reordered"):

@@ -22,7 +22,8 @@ from protocol.bitpack import unpack_bits
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob
 from protocol.tools.loopback import run_paths
-from protocol.wire import HEADER_SIZE
+from protocol.volumes import SEPARATION_SIZE
+from protocol.wire import HEADER_SIZE, NONCE_SIZE
 
 from .test_privacy import chi2_rejects, ks_rejects
 
@@ -71,7 +72,8 @@ def alice_view(bob_path: Any, ot_pair: Any, *, honest: bool = True) -> list[list
     for _ in range(RUNS):
         alice, _, received = one_run(CROSSING, bob_path, ot_pair)
         assert not honest or alice.hits == [bob_path is BOB_PATH]
-        offer = received[0][HEADER_SIZE + 18 :]  # after n and Bob's nonce
+        offer = received[0][HEADER_SIZE + 2 + NONCE_SIZE + SEPARATION_SIZE :]  # after n, Bob's
+        # nonce and his separation minima (public)
         flips = offer[-alice._impl.plan.products.correction_size() :]  # type: ignore[attr-defined]
         digits = received[1][HEADER_SIZE:]
         run_bits = unpack_bits(offer[:40], 320)  # OT extension
