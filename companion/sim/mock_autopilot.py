@@ -205,8 +205,9 @@ class MockAutopilot(MockFlight):
             if not self.armed:
                 result = mavlink.MAV_RESULT_DENIED
             else:
-                self._takeoff_alt = 2.5 if math.isnan(m.param7) else float(m.param7) - self.home[2]
-                self.flying = True
+                self._guided_takeoff(
+                    2.5 if math.isnan(m.param7) else float(m.param7) - self.home[2]
+                )
         elif command == mavlink.MAV_CMD_MISSION_START:
             if not self.armed or not self._startable():
                 result = mavlink.MAV_RESULT_DENIED
@@ -244,13 +245,11 @@ class MockAutopilot(MockFlight):
             main, sub = int(m.param2), int(m.param3)
             hold, resume = (main, sub) == (4, 3), (main, sub) == (4, 4)
         if hold and self.flying:
-            self.mission_running = False
-            self.holding = True
+            self._hold()
         elif resume and self.armed and self.mission:
             if not self._startable():
                 return int(mavlink.MAV_RESULT_DENIED)
             self._start_mission()
-            self.holding = False
         return int(mavlink.MAV_RESULT_ACCEPTED)
 
     async def _fly(self) -> None:

@@ -23,8 +23,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from ..autopilots import Firmware, Personality
-from ..flightpath import DO_JUMP, jump_target
-from ..mission import FRAMES_GLOBAL, MissionError, MissionItem
+from ..mission import FRAMES_GLOBAL, MissionItem
 from .mock_links import Faults, Link
 
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
@@ -117,7 +116,6 @@ class MissionServer:
         self.uploads_accepted = 0
         self._upload: _Upload | None = None
         self._garbles_left = faults.garble_uploads
-        self._jumps: dict[int, int] = {}  # DO_JUMP index -> jumps taken
 
     @property
     def mission(self) -> list[MissionItem]:
@@ -126,35 +124,6 @@ class MissionServer:
     def _home_item(self) -> MissionItem:
         lat, lon, alt = self.home
         return MissionItem(0, 0, 16, 0, 1, 0, 0, 0, 0, round(lat * 1e7), round(lon * 1e7), alt)
-
-    # ------------------------------------------------------------------ DO_JUMP in flight
-
-    def _jump(self, index: int) -> int | None:
-        """Take the DO_JUMP at ``index`` if its repeat count (param2; -1: for ever) allows: its
-        target, else None.  As :func:`~companion.flightpath.flight_order`: the counters live
-        until the mission restarts (new mission, clear, a new take-off), nested loops too."""
-        item = self.mission[index]
-        try:
-            target = jump_target(self.mission, item)
-        except MissionError:
-            return None  # a jump to nowhere: skipped
-        wanted = int(item.param2) if math.isfinite(item.param2) else 0
-        taken = self._jumps.get(index, 0)
-        if 0 <= wanted <= taken:
-            return None
-        self._jumps[index] = taken + 1
-        return target
-
-    def _resolve(self, index: int) -> int | None:
-        """The item flown from ``index`` on, jumps followed (None: the mission is over)."""
-        for _ in range(2 * len(self.mission) + 2):  # a loop of jumps only: give up
-            if not 0 <= index < len(self.mission):
-                return None
-            if self.mission[index].command != DO_JUMP:
-                return index
-            target = self._jump(index)
-            index = index + 1 if target is None else target
-        return None
 
     # ------------------------------------------------------------------ subclass hooks
 

@@ -15,6 +15,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from companion.autopilot import Autopilot, AutopilotError, RolledBack, Timeouts
 from companion.autopilots import personality
+from companion.flight_model import Kinematics
 from companion.flightpath import flight_path
 from companion.mission import MissionItem, normalise
 from companion.planner import plan_offsets
@@ -218,7 +219,11 @@ class _Client(asyncio.DatagramProtocol):
             self.transport.close()
 
 
-FAST = FlightModel(cruise_m_s=10.0, climb_m_s=5.0, time_scale=20.0, rate_hz=20.0)
+FAST = FlightModel(
+    time_scale=20.0,
+    rate_hz=20.0,
+    craft=Kinematics(cruise_m_s=10.0, climb_m_s=5.0, takeoff_delay_s=0.0),
+)
 
 
 async def _flying(mock: MockAutopilot) -> _Client:

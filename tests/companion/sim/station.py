@@ -10,6 +10,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.flight_model import Kinematics
 from companion.mission import MissionItem
 from companion.sim.mock_autopilot import FlightModel, MockAutopilot, item_message
 from companion.sim.mock_missions import item_from
@@ -18,7 +19,18 @@ from companion.sim.replay import free_udp_port as free_port
 from ..missions import HOME, item
 
 FROZEN = FlightModel(time_scale=0.0)  # simulated time stands still: nothing moves by itself
-FAST = FlightModel(cruise_m_s=50.0, climb_m_s=50.0, acceptance_m=2.0)
+# a vehicle that gets anywhere at once (tests of the mission protocol, not of the kinematics)
+FAST = FlightModel(
+    craft=Kinematics(
+        cruise_m_s=50.0,
+        speed_factor=1.0,
+        accel_m_s2=500.0,
+        climb_m_s=50.0,
+        descend_m_s=50.0,
+        vertical_accel_m_s2=500.0,
+        takeoff_delay_s=0.0,
+    )
+)
 LAT, LON = HOME[0], HOME[1]
 
 
