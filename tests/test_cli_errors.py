@@ -325,7 +325,7 @@ def test_every_option_has_help() -> None:
 
 # Options that are off unless given (files to read or write): no default to show.
 NO_DEFAULT = {"--mission", "--trajectory", "--out", "--plot", "--export", "--px4", "--log-json"}
-NO_DEFAULT |= {"--config", "--operator"}
+NO_DEFAULT |= {"--config", "--operator", "--data"}
 
 
 def _options(parser: argparse.ArgumentParser, name: str) -> list[tuple[str, argparse.Action, str]]:
