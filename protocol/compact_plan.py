@@ -100,9 +100,10 @@ class Test(enum.Enum):
     """What one compared value is (:mod:`protocol.volumes` for the geometry).  Alice holds
     every threshold; Bob's own parameters (his segments' R'_k and L_k) shift his share."""
 
-    O1 = "o1"  # orient(A_i, A_i+1, B_k): [>= 1] with EQ; capsules: [>= -R_i], [>= R_i + 1]
+    O1 = "o1"  # orient(A_i, A_i+1, B_k): [>= 1] with EQ; capsules: also [>= -R_i],
+    # [>= R_i + 1], and no EQ (the crossing needs only P there)
     T = "t"  # projection of B_k on Alice's segment i: [>= 0], [>= T_i + 1]
-    O3 = "o3"  # orient(B_k, B_k+1, A_j): [>= 1] with EQ
+    O3 = "o3"  # orient(B_k, B_k+1, A_j): [>= 1] with EQ (no EQ with capsules)
     O3_LOW = "o3-low"  # O3 + R'_k: [>= 0]
     O3_HIGH = "o3-high"  # O3 - R'_k - 1: [>= 0] (its negation: O3 <= R'_k)
     T3 = "t3"  # (A_j - B_k) . d_k: [>= 0]
@@ -201,7 +202,8 @@ def make_plan(m: int, n: int, grid: GridSpec, digit_bits: int, volumes: VolumeSp
     ge: dict[tuple[Test, int], list[int]] = {}
     eq: dict[tuple[Test, int], int] = {}
     for c, widths in zip(compared, leaves.digits, strict=True):
-        exact = c.test in (Test.O1, Test.O3)  # EQ of the first threshold: [v = 0]
+        # EQ of the first threshold, [v = 0]: for the exact crossing only
+        exact = c.test in (Test.O1, Test.O3) and not capsules
         roots = []
         for t in range(c.thresholds):
             nodes = [Node(circuit.input(), circuit.input()) for _ in widths]
@@ -219,7 +221,7 @@ def make_plan(m: int, n: int, grid: GridSpec, digit_bits: int, volumes: VolumeSp
         if kind is Kind.O1:
             o1 = ge[Test.O1, position]
             near = Range(o1[1], circuit.not_(o1[2])) if capsules else None
-            wires.append(Wires(orient=Orient(o1[0], eq[Test.O1, position]), near=near))
+            wires.append(Wires(orient=Orient(o1[0], eq.get((Test.O1, position), -1)), near=near))
         elif kind is Kind.T:
             low, high = ge[Test.T, position]
             wires.append(Wires(proj=Proj(circuit.not_(low), high)))
@@ -228,7 +230,7 @@ def make_plan(m: int, n: int, grid: GridSpec, digit_bits: int, volumes: VolumeSp
             if capsules:
                 high = ge[Test.O3_HIGH, position][0]
                 near = Range(ge[Test.O3_LOW, position][0], circuit.not_(high))
-            orient = Orient(ge[Test.O3, position][0], eq[Test.O3, position])
+            orient = Orient(ge[Test.O3, position][0], eq.get((Test.O3, position), -1))
             wires.append(Wires(orient=orient, near=near))
         elif kind is Kind.T3:
             high = ge[Test.T3_HIGH, position][0]

@@ -21,10 +21,13 @@ no branch on a secret is needed.  Alice's bit for segment i is the OR over Bob's
 Eleven ANDs per segment pair, three levels above the comparisons, plus an OR tree.
 
 *Volumes* (:func:`volume_hits`).  With a horizontal separation r > 0 the pair meets when the
-segments cross properly -- P1 N2 xor N1 P2 and the same for o3, o4 -- or an end point of one
-lies in the other's capsule (a touching or collinear pair has an end point at distance 0, so
-the exact crossing test is not needed): one of the four vertex pairs within r (``disc``: [D <=
-r^2]), or a vertex in the *slab* of the other's segment, [0 <= t <= L] and [|c| <= R] --
+segments cross -- (P1 xor P2) (P3 xor P4): one end of each strictly on the positive side of
+the other's line, the other end not; this holds for every proper crossing and only where the
+segments meet (then the two lines cross at one point, which lies on both segments; parallel,
+collinear and zero-length pairs give P1 = P2) -- or an end point of one lies in the other's
+capsule (a touching or collinear pair has an end point at distance 0, so no Z is needed):
+one of the four vertex pairs within r (``disc``: [D <= r^2]), or a vertex in the *slab* of
+the other's segment, [0 <= t <= L] and [|c| <= R] --
 ``proj`` and ``near1`` for Bob's vertices against Alice's segments, ``along3`` and ``near3``
 for Alice's vertices against Bob's.  The pair then conflicts when also its altitude bands
 (``bands``: both of [a_lo - v <= b_hi], [b_lo - v <= a_hi]) and its time windows
@@ -82,13 +85,10 @@ def segments_meet(
     return c.xor(c.and_(straddle(o1, o2), straddle(o3, o4)), c.and_(col, w))
 
 
-def crosses_properly(c: Circuit, o1: Orient, o2: Orient, o3: Orient, o4: Orient) -> int:
-    """C, D strictly on opposite sides of AB and A, B strictly on opposite sides of CD."""
-
-    def across(first: Orient, second: Orient) -> int:
-        return c.xor(c.and_(first.p, _negative(c, second)), c.and_(_negative(c, first), second.p))
-
-    return c.and_(across(o1, o2), across(o3, o4))
+def crosses(c: Circuit, o1: Orient, o2: Orient, o3: Orient, o4: Orient) -> int:
+    """(P1 xor P2) (P3 xor P4): every proper crossing, and only segments that meet (module
+    docstring); touching and collinear pairs are left to the capsules.  One AND."""
+    return c.and_(c.xor(o1.p, o2.p), c.xor(o3.p, o4.p))
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ def volume_hits(
     ``o1[i][k]`` orient(A_i, A_i+1, B_k) and ``proj[i][k]`` for Bob's vertex k (n + 1 of them),
     ``o3[j][k]`` orient(B_k, B_k+1, A_j) for Alice's vertex j (m + 1 of them).  Without
     ``capsules`` the pairs are decided by :func:`segments_meet` (the exact crossing, r = 0),
-    with them by the proper crossing or a vertex within r (module docstring).
+    with them by a crossing (P bits only) or a vertex within r (module docstring).
     ``bands[i][k]`` and ``windows[i][k]``, when given, must both be inside for the pair to
     conflict.  ``flag`` (Bob's input, free XOR) flips every pair with his segment 0: he sets it
     only when segment 0 is a link (never a hit), to answer *meets* everywhere
@@ -168,7 +168,7 @@ def volume_hits(
         def pair(i: int, k: int) -> int:
             return c.or_all(
                 [
-                    crosses_properly(c, o1[i][k], o1[i][k + 1], o3[i][k], o3[i + 1][k]),
+                    crosses(c, o1[i][k], o1[i][k + 1], o3[i][k], o3[i + 1][k]),
                     caps.disc[i][k],
                     caps.disc[i][k + 1],
                     caps.disc[i + 1][k],
