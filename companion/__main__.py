@@ -300,6 +300,16 @@ def _parser() -> argparse.ArgumentParser:
         help=f"altitude offset, m ({given % ('offset.offset_m', '10.0')})",
     )
     run.add_argument(
+        "--separation",
+        type=cli.number(0, 10_000),
+        help=f"horizontal separation, m ({given % ('separation.horizontal_m', '15.0')})",
+    )
+    run.add_argument(
+        "--vertical-separation",
+        type=cli.number(0, 10_000),
+        help=f"vertical separation, m ({given % ('separation.vertical_m', '10.0')})",
+    )
+    run.add_argument(
         "--max-altitude",
         type=cli.number(0, 10_000, above=True),
         help=f"metres above home ({given % ('offset.max_altitude_m', '120.0')})",

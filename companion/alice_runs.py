@@ -14,11 +14,14 @@ import functools
 import itertools
 import logging
 import math
+import secrets
 
 from protocol.compact_plan import message_sizes
 from protocol.errors import ConsistencyError, ProtocolError
 from protocol.grid import GridSpec
 from protocol.intersection import MAX_SEGMENTS, Alice, Limits
+from protocol.volumes import CROSSING, VolumeSpec
+from protocol.volumes import Route as PathRoute
 from protocol.wire import Suite
 
 from .auth.certificate import Certificate
@@ -31,13 +34,16 @@ from .exchange import PeerRefused, run_alice
 from .failsafe import too_late
 from .link.arq import LinkError
 from .neighbours import Neighbour
-from .peers import Peer, distance_m, time_to_meet
+from .peers import Peer, distance_m, near_cut, segment_distance_m, time_to_meet
 from .progress import RunProgress
 from .radio import OWN_FULL, OWN_NEAR
 from .roles import Role
+from .schedule import route_volumes
 
 log = logging.getLogger("companion")
 NEAR_SLACK_S = 30.0  # the near run reaches this far past the earliest possible meeting
+NEAR_SLACK = 1.25  # a first run takes this much longer than its airtime estimate (measured:
+# 1.2-1.4 with a fresh OT setup on US915 SF7 at 10 % loss, the setup's computing; 1.05 without)
 BOB_GUESS = 4  # Bob's size before he tells it: a remaining route of a few legs (m x m would
 # stretch the horizon of a long route over everything; the run watch uses his real size)
 QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a full run
@@ -59,10 +65,10 @@ class AliceRuns(Edits):
             if not due:
                 continue
             for peer in due:
-                version = (peer.beacon.mission_version, self.version)
+                version = (peer.beacon.mission_version, self.compare_version)
                 if peer.plan_version != version or not peer.plan:
                     if peer.plan_version != version:
-                        peer.covered = set()
+                        peer.covered, peer.settled, peer.near_run = set(), set(), None
                     peer.plan, peer.plan_version = self._phases(peer), version
             # A full run after a near run waits until it is needed (or the channel is quiet):
             # meanwhile the radio serves every drone's near runs.
@@ -91,7 +97,9 @@ class AliceRuns(Edits):
                 log.exception("node %d: comparison failed", self.settings.node)
                 self.record(EventKind.RUN_FAILED, peer=peer.node, error=f"internal: {exc!r}")
                 done = False
-            if done:
+            if done and phase == "full" and peer.full_left:
+                peer.full_left = False  # the full run went in parts: the next part at once
+            elif done:
                 peer.plan.pop(0)
                 if not peer.plan:
                     peer.compared = peer.plan_version
@@ -99,7 +107,8 @@ class AliceRuns(Edits):
                     peer.full_after = self._full_deadline(peer, horizon)
             else:
                 peer.plan = []
-                peer.next_try = self.clock.now() + self.settings.retry_after_s
+                retry = self.settings.retry_after_s if peer.retry_in is None else peer.retry_in
+                peer.next_try, peer.retry_in = self.clock.now() + retry, None
             self._wake.set()  # look again at once
 
     def _full_deadline(self, peer: Peer, horizon: int) -> float:
@@ -135,22 +144,20 @@ class AliceRuns(Edits):
         return phases
 
     def _horizon_m(self, peer: Peer, path: list[tuple[int, int]]) -> int:
-        """How far ahead the near run looks: long enough that what lies beyond can wait for
-        the full run -- every peer now due gets its near and its full run, one at a time, so
-        the estimate counts them all --, past the worst-case time until the peer could be
-        here (a near run that ends before that moment would find nothing), and at least
-        lookahead_s of flight.  Every term comes from what the beacons and the run sizes
-        already tell: the horizon shows Bob nothing about Alice's path."""
+        """How far ahead the near run looks: past the worst-case time until the peer could
+        be here (a near run that ends before that moment would find nothing), long enough
+        for every peer now due to get its near run (one at a time: the estimate counts them
+        all), and at least lookahead_s of flight.  What lies beyond is the full run's, which
+        follows at once when it is needed before the drone leaves what the near run covered
+        (:meth:`_full_deadline`).  A protected-volume run is about 2.5 times a crossing's
+        bytes: a near run that waited for the full run's time too would cover everything
+        and come too late.  Every term comes from what the beacons and the run sizes already
+        tell: the horizon shows Bob nothing about Alice's path."""
         speed = max(self.speed_m_s, self.settings.cruise_m_s)  # Bob cuts his path alike
         grid = self._grid(path)
-        m = Limits().padded(min(len(path) - 1, MAX_SEGMENTS))
         now = self.clock.now()
         due = [p for p in self.peers.values() if self._should_compare(p, now)] or [peer]
-        runs = sum(
-            self._seconds(2, grid, fresh=p.node not in self.holder_setups)
-            + self._seconds(m, grid, fresh=False, n=min(m, BOB_GUESS))
-            for p in due
-        )
+        runs = sum(self._seconds(2, grid, fresh=p.node not in self.holder_setups) for p in due)
         # Nothing can happen before the peer could be here (both at cruise speed at least);
         # reach well past that moment.
         cruise = self.settings.cruise_m_s
@@ -160,10 +167,141 @@ class AliceRuns(Edits):
         seconds = max(self.settings.lookahead_s, runs + self.settings.failsafe.margin_s, meet)
         return round(seconds * speed)
 
+    def _peer_earliest(self, peer: Peer, a: tuple[int, int], b: tuple[int, int]) -> float:
+        """The earliest second from now the peer could come within the separation of our
+        segment a-b: its distance at cruise speed at least (it may have flown since it was
+        last heard), and never before the two drones could meet at all."""
+        speed = max(self.speed_m_s, self.settings.cruise_m_s)
+        cruise = self.settings.cruise_m_s
+        meet = time_to_meet(self.position[:2], speed, peer, floor_m_s=cruise, measured=False)
+        gap = segment_distance_m(peer.position, a, b) - self.settings.separation.horizontal_m
+        reach = max(gap, 0.0) / max(self._peer_speed(peer), cruise) - self._silent_for(peer)
+        return max(meet, reach)
+
+    def _before_meeting(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
+        """How many of a near run's first segments we leave before the peer could come
+        near them (:meth:`_peer_earliest`, less the margin): no volume of the peer's can
+        meet them, and a near run without them is smaller and sooner.  At least two
+        segments stay; the full run compares everything left."""
+        if self.on_ground or len(path) <= 3 or not self.settings.lookahead_s:
+            return 0
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        tolerance = self.settings.separation.tolerance
+        margin = self.settings.failsafe.margin_s
+        skip = 0
+        for j in range(len(path) - 3):  # (two segments stay)
+            earliest = self._peer_earliest(peer, path[j], path[j + 1]) - margin
+            if not math.isfinite(earliest) or schedule.window(start + j, tolerance)[1] >= earliest:
+                break
+            skip += 1
+        return skip
+
+    def _bob_horizon(
+        self,
+        horizon: int,
+        start: int,
+        path: list[tuple[int, int]],
+        peer: Peer,
+        grid: GridSpec,
+        *,
+        fresh: bool,
+    ) -> int:
+        """How far the peer cuts its path in a near run where ours is ``path`` (from segment
+        ``start``): as far as it can fly (at cruise speed) until we leave the last of our
+        segments, late by our tolerance, plus the margin and the separation.  Our near
+        segments are then flown before the peer can be past its cut, and the full run need
+        not compare them again (:meth:`_decided_by_near`).  But a longer cut may make the
+        peer's side of the near run larger (up to its whole remaining path, its beacon's size
+        class): only when even that run, its estimate stretched by ``NEAR_SLACK`` (the OT
+        setup's computing, collisions), still ends before the peer could be here; otherwise
+        -- and on the ground, whose windows never close -- ``horizon`` as asked."""
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        last = start + len(path) - 2
+        end = schedule.window(last, self.settings.separation.tolerance)[1]
+        if not math.isfinite(end):
+            return horizon
+        reach = self.settings.cruise_m_s * (end + self.settings.failsafe.margin_s)
+        longer = math.ceil(reach + self.settings.separation.horizontal_m)
+        if longer <= horizon:
+            return horizon
+        limits = Limits()
+        m = limits.padded(min(len(path) - 1, MAX_SEGMENTS))
+        n = limits.padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        seconds = self._seconds(m, grid, fresh=fresh, n=n) * NEAR_SLACK
+        return horizon if too_late(seconds, self._urgency(peer), self.settings.failsafe) else longer
+
+    def _decided_by_near(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
+        """How many of a full run's first segments it need not compare: those the near run
+        decided (:meth:`_decided`), and those we leave (late by our tolerance) before the
+        full run's result can come -- for them it could only come too late; the fail-safe
+        watches them until the near run's decision expires.  A full run without them is
+        smaller and sooner."""
+        if peer.near_run is None or self.on_ground:
+            return 0
+        decided = self._decided(peer)
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        tolerance = self.settings.separation.tolerance
+        grid = self._grid(path)
+        skip = 0
+        for j in range(len(path) - 2):  # (one segment stays)
+            k = start + j
+            if k in decided:
+                skip += 1
+                continue
+            if k not in peer.covered:
+                break
+            m = Limits().padded(min(len(path) - 2 - j, MAX_SEGMENTS))
+            n = min(m, BOB_GUESS)
+            if schedule.window(k, tolerance)[1] >= self._seconds(m, grid, fresh=False, n=n):
+                break
+            skip += 1
+        return skip
+
+    def _full_chunk(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
+        """How many segments of ``path`` (from segment ``start``, what a full run has left to
+        compare) the next full run takes: all of them, unless a run of all would come too
+        late for the first -- later than we enter it, and than the peer could be here -- and
+        a smaller one would not: then the most, in powers of two, that come in time (at least
+        two).  The next run takes the rest at once: the full run goes in parts, the urgent
+        part first.  On the ground (nothing is urgent) all of them."""
+        segments = len(path) - 1
+        if self.on_ground or segments <= 2:
+            return segments
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        enter = schedule.window(start, self.settings.separation.tolerance)[0]
+        deadline = max(enter, self._urgency(peer))
+        grid = self._grid(path)
+        n = Limits().padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        fresh = peer.node not in self.holder_setups
+        m = Limits().padded(min(segments, MAX_SEGMENTS))
+        while m > 2:
+            seconds = self._seconds(m, grid, fresh=fresh, n=n)
+            if not too_late(seconds, deadline, self.settings.failsafe):
+                break
+            m //= 2
+        return min(m, segments)
+
     async def _run(self, peer: Peer, phase: str, horizon: int) -> bool:
         """One run; True when it ended with a result (or had nothing to compare)."""
         start, path = self._remaining_path()
-        path = self._near(path, horizon)
+        if phase == "near":
+            skip = self._before_meeting(peer, start, path)
+            if skip:  # what is left of the horizon after the segments skipped
+                here = self._here()
+                left = horizon - sum(
+                    distance_m(here if here is not None and k == 0 else a, b)
+                    for k, (a, b) in enumerate(itertools.pairwise(path[: skip + 1]))
+                )
+                peer.settled |= set(range(start, start + skip))  # no volume of its can meet them
+                start, path = start + skip, near_cut(path[skip:], max(left, 1.0), least=2)
+            else:
+                path = self._near(path, horizon)
+        else:
+            skip = self._decided_by_near(peer, start, path)
+            start, path = start + skip, path[skip:]
+            chunk = self._full_chunk(peer, start, path)
+            peer.full_left = chunk < len(path) - 1
+            path = path[: chunk + 1]
         if len(path) < 2:
             return True
         neighbour = self.neighbours.get(peer.node)
@@ -198,18 +336,25 @@ class AliceRuns(Edits):
         path: list[tuple[int, int]],
         neighbour: Neighbour,
     ) -> bool:
-        """The run itself (a fresh OT setup again if the peer lost ours)."""
+        """The run itself (a fresh OT setup again if the peer lost ours).  A near run asks
+        the peer for a little more of its path than it shows of its own (:meth:`_bob_horizon`)
+        so that the full run after it can leave out what the near run decided."""
         peer.role = Role.ALICE
+        asked = horizon
         for attempt in range(2):
             grid = self._grid(path)
             setup = self.holder_setups.get(peer.node)
+            if phase == "near":
+                horizon = self._bob_horizon(asked, start, path, peer, grid, fresh=setup is None)
             try:
+                route, volumes = self._own_route(grid, start, path)
                 alice = Alice(
-                    grid.project_path(path),
+                    route,
                     grid,
                     suite=self.settings.suite,
                     setup=setup,
                     horizon_m=horizon,
+                    volumes=volumes,
                     ot_security=self.settings.ot_security,
                     trusted_keys=neighbour.operator.paper_keys,
                 )
@@ -229,10 +374,13 @@ class AliceRuns(Edits):
                 estimate_s=round(needed, 1),
                 time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
             )
+            if phase == "near":
+                peer.near_run = (self.clock.now(), horizon)
             if too_late(needed, meet, self.settings.failsafe):
                 await self._precaution(peer, needed, meet)
             watchdog = asyncio.create_task(self._watch(peer, alice, grid, needed))
             self._sessions += 1
+            self._own_on_air = alice
 
             def secure(session: int, cert: Certificate = neighbour.cert) -> Initiator:
                 route = Route(self.settings.node, peer.node, session)
@@ -268,6 +416,13 @@ class AliceRuns(Edits):
                     peer.role = Role.BOB  # the peer already resolved this pair as Alice
                     self.record(EventKind.YIELDED, peer=peer.node, reason="the peer is Alice")
                     return False
+                if exc.code is Refusal.BUSY:
+                    # Its own run is on the air: not a failure, ask again soon (at a random
+                    # moment: others it refused are waiting too).
+                    low, high = self.settings.busy_retry_s
+                    peer.retry_in = low + (high - low) * secrets.randbelow(1001) / 1000
+                    self.record(EventKind.PEER_BUSY, peer=peer.node, phase=phase)
+                    return False
                 if exc.code is Refusal.UNKNOWN_PEER:
                     self._cert_now.set()  # it lacks our certificate: beacon it
                 box = (  # off our beacons, or beyond the peer's limits: which box we asked
@@ -297,6 +452,7 @@ class AliceRuns(Edits):
                 return False
             finally:
                 self._sessions -= 1
+                self._own_on_air = None
                 self._running = None
                 watchdog.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
@@ -310,6 +466,8 @@ class AliceRuns(Edits):
         covered = set(range(start, start + len(path) - 1))
         peer.conflicts = (peer.conflicts - covered) | flagged
         peer.covered |= covered
+        if phase == "full":
+            peer.settled |= covered
         self.record(
             EventKind.RESULT,
             peer=peer.node,
@@ -327,6 +485,28 @@ class AliceRuns(Edits):
         await self._replan(f"result of the {phase} run with {peer.node}")
         return True
 
+    def _own_route(
+        self, grid: GridSpec, start: int, path: list[tuple[int, int]]
+    ) -> tuple[PathRoute, VolumeSpec]:
+        """What we compare as Alice: the original mission's path from segment ``start`` on
+        the grid, with its bands and windows (:mod:`companion.schedule`), and the run's
+        volume parameters (epoch: now)."""
+        epoch = int(self.clock.wall())
+        volumes = self._volumes(grid, epoch)
+        points = grid.project_path(path)
+        if volumes == CROSSING:
+            return PathRoute(points), volumes
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        bands, windows = route_volumes(
+            schedule,
+            start,
+            len(path) - 1,
+            grid.resolution_mm,
+            self._wall_of_state() - epoch,
+            self.settings.separation.tolerance,
+        )
+        return PathRoute(points, bands, windows), volumes
+
     def _run_bytes(self, alice: Alice, grid: GridSpec, *, fresh: bool) -> int | None:
         """Payload bytes the run is expected to move both ways (Bob's size guessed as
         Alice's until his first reply; None for the paper suite, which has no size model)."""
@@ -334,6 +514,11 @@ class AliceRuns(Edits):
             return None
         n = alice.m if alice.n is None else alice.n
         sizes = message_sizes(
-            alice.m, n, grid, fresh_setup=fresh, ot_security=self.settings.ot_security
+            alice.m,
+            n,
+            grid,
+            fresh_setup=fresh,
+            ot_security=self.settings.ot_security,
+            volumes=self._volumes(grid),
         )
         return sum(size for _, size in sizes)

@@ -1,13 +1,13 @@
 """Beacons: what a drone announces on the radio every few seconds (pure, fixed width).
 
-Every position beacon starts with the same 19 bytes::
+Every position beacon starts with the same 24 bytes::
 
     head u8 | flags u8 | lat i32 (degE7) | lon i32 | alt i16 (m AMSL) | mission_version u16
-    | levels u8 | size_class u8 | time u16 (Unix s mod 2^16) | counter u8
+    | slot base u16 | slot mask u32 | size_class u8 | time u16 (Unix s mod 2^16) | counter u8
 
 and is authenticated in one of two ways:
 
-* **signed** (133 + 8 k bytes): ``body | beacon key (32) | keys_hash (16) | Ed25519
+* **signed** (136 + 4 k bytes): ``body | beacon key (32) | keys_hash (16) | Ed25519
   signature (64) | k tags`` -- signed under the key the sender's certificate names (the tags,
   as below, tell each neighbour that the sender holds its key).  It carries the sender's
   *beacon key*, an X25519 key made at every start, and ``keys_hash``, the hash of all its
@@ -15,7 +15,7 @@ and is authenticated in one of two ways:
   :func:`keys_hash`).  Sent at
   the start, when a new drone asks, when the sender learns a new neighbour, and every few
   minutes.
-* **tagged** (19 + 4 k bytes): ``body | k tags of 4 bytes`` -- one per neighbour whose beacon
+* **tagged** (24 + 4 k bytes): ``body | k tags of 4 bytes`` -- one per neighbour whose beacon
   key the sender holds (at most 8): HMAC-SHA256 under a key only the two of them can compute
   (X25519 of their beacon keys, per direction), cut to 4 bytes, as LoRaWAN's and Bluetooth's
   message integrity codes are.  A receiver checks the tag meant for it (it tries the k): a
@@ -34,8 +34,10 @@ and asks the drones nearby for their certificates and signed beacons.
 ``head``: the format version (4) in the high nibble, the kind in the low one.  Position
 flags: bit 0 on the ground (about to take off), bits 1-2 the cipher suites offered.
 ``size_class``: the remaining path's padded size is at most 2^size_class segments (a run
-asking for more is refused before any work).  ``levels``: bit L set if the drone flies some
-of its remaining path L offsets above its plan (:mod:`companion.levels`).  The position is
+asking for more is refused before any work).  ``mission_version``: a digest of the path as
+flown in four dimensions (ground track, altitudes, schedule epoch): a peer compares again
+when it changes.  The slots: the 5 m altitude slots the remaining path occupies as flown
+(:class:`companion.levels.Slots`), for peers that must keep clear of them.  The position is
 coarse operational information of the kind Remote ID broadcasts anyway; the *path* is never
 in a beacon.
 """
@@ -52,16 +54,17 @@ from protocol.wire import Suite
 from .auth.certificate import SIZE as CERT_SIZE
 from .auth.certificate import Certificate, CertificateError
 from .auth.keys import SIGNATURE_SIZE, PublicKey, SigningKey
+from .levels import Slots
 
-VERSION = 4
+VERSION = 5
 SIGNED, CERTIFICATE, TAGGED = 1, 2, 3
 KEYS_HASH_SIZE = 16
 BEACON_KEY_SIZE = 32
 TAG_SIZE = 4
 MAX_TAGS = 8
-_BODY = struct.Struct(">BBiihHBBHB")
-BODY_SIZE = _BODY.size  # 19
-SIGNED_SIZE = BODY_SIZE + BEACON_KEY_SIZE + KEYS_HASH_SIZE + SIGNATURE_SIZE  # 131
+_BODY = struct.Struct(">BBiihHHIBHB")
+BODY_SIZE = _BODY.size  # 24
+SIGNED_SIZE = BODY_SIZE + BEACON_KEY_SIZE + KEYS_HASH_SIZE + SIGNATURE_SIZE  # 136
 CERT_BEACON_SIZE = 2 + CERT_SIZE  # 117
 UNAUTHENTICATED_SIZE = 24  # what a beacon was before it was authenticated (for the costs)
 ON_GROUND = 0x01
@@ -92,7 +95,7 @@ class Beacon:
     mission_version: int
     time: int  # Unix seconds (as received: the low 16 bits, see :func:`full_time`)
     counter: int
-    levels: int = 0
+    slots: Slots = Slots()  # noqa: RUF009 (frozen: immutable)
     size_class: int = MAX_SIZE_CLASS
 
     def body(self, kind: int) -> bytes:
@@ -107,7 +110,8 @@ class Beacon:
             self.lon,
             max(-32768, min(32767, self.alt_m)),
             self.mission_version & 0xFFFF,
-            self.levels & 0xFF,
+            self.slots.base,
+            self.slots.mask,
             self.size_class,
             self.time & 0xFFFF,
             self.counter & 0xFF,
@@ -177,19 +181,26 @@ class CertBeacon:
 
 def _body(data: bytes) -> Beacon:
     fields = _BODY.unpack(data[:BODY_SIZE])
-    _, flags, lat, lon, alt, version, levels, size_class, time, counter = fields
+    _, flags, lat, lon, alt, version, base, slots, size_class, time, counter = fields
     mask = flags >> 1
     if flags & ~0b111 or mask == 0:
         raise BeaconError("unknown beacon flags or suites")
-    if levels & 1:
-        raise BeaconError("level 0 is not a climb")
     if size_class > MAX_SIZE_CLASS:
         raise BeaconError(f"size class {size_class} above {MAX_SIZE_CLASS}")
     if abs(lat) > 900_000_000 or abs(lon) > 1_800_000_000:
         raise BeaconError("beacon position out of range")
     suites = frozenset(s for s in Suite if mask >> (s - 1) & 1)
     return Beacon(
-        lat, lon, alt, bool(flags & ON_GROUND), suites, version, time, counter, levels, size_class
+        lat,
+        lon,
+        alt,
+        bool(flags & ON_GROUND),
+        suites,
+        version,
+        time,
+        counter,
+        Slots(base, slots),
+        size_class,
     )
 
 

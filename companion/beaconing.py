@@ -19,7 +19,6 @@ from .auth.trust import UnknownPeers
 from .beacon import Beacon, CertBeacon, size_class
 from .edits import Edits
 from .events import EventKind
-from .levels import levels_mask
 from .link.arq import LinkError
 from .neighbours import NO_CERTIFICATE, Heard, Hearing
 from .peers import Peer, distance_m
@@ -60,7 +59,7 @@ class Beaconing(Edits):
             self.version,
             time_s,
             counter,
-            levels_mask(self.levels),
+            self._slots(),
             size_class(segments),
         )
         now = self.clock.now()
@@ -180,10 +179,10 @@ class Beaconing(Edits):
             self._beacon_now.set()  # let it hear us without waiting an interval
         elif hearing.new_keys:
             self._drop_setups(src)  # it restarted (a new beacon key): they are gone on its side
-        levels_changed = peer.beacon.levels != beacon.levels
+        slots_changed = peer.beacon.slots != beacon.slots
         peer.heard(beacon, now, self.position[:2])
-        if levels_changed and (peer.conflicts or src in self.precaution):
-            self._spawn(self._replan(f"peer {src} announced levels {beacon.levels:#04x}"))
+        if slots_changed and (peer.conflicts or src in self.precaution):
+            self._spawn(self._replan(f"peer {src} announced altitude slots"))
         self._wake.set()
 
     def _may_ask(self, node: int) -> bool:

@@ -10,10 +10,12 @@ the path.
 from __future__ import annotations
 
 import logging
+import math
 
 from protocol.errors import ProtocolError
 from protocol.grid import GridKind
 from protocol.intersection import Bob, State
+from protocol.volumes import Route as PathRoute
 from protocol.wire import Hello
 
 from .auth.session import AuthenticationError, Init, Refusal, Responder, Route
@@ -29,6 +31,7 @@ from .peers import MAX_SPEED_M_S, Peer, distance_m
 from .progress import RunProgress
 from .radio import ANSWER_FULL, ANSWER_NEAR
 from .roles import Role
+from .schedule import T_RANGE_S, route_volumes, run_volumes
 
 log = logging.getLogger("companion")
 SETUPS_PER_PEER = 2
@@ -44,9 +47,30 @@ class BobAnswers(CompanionCore):
             peer, session = await self.endpoint.accept()
             self._spawn(self._answer(peer, session))
 
-    def _bob_path(self, hello: Hello) -> list[tuple[int, int]]:
-        _, path = self._remaining_path()
-        return point_as_segment(self._near(path, hello.horizon_m))  # hovering: a point
+    def _bob_path(self, hello: Hello) -> list[tuple[int, int]] | PathRoute:
+        """What we answer with: the rest of the mission the vehicle holds, cut at Alice's
+        horizon, with its bands (on her grid) and windows (after her epoch) when she asks
+        for them."""
+        start, path = self._remaining_flown()
+        path = self._near(path, hello.horizon_m)
+        points = point_as_segment(path)  # hovering: a point
+        volumes = hello.volumes
+        if not (volumes.bands or volumes.windows):
+            return points
+        tolerance = self.settings.separation.tolerance
+        resolution = hello.grid.resolution_mm
+        since = self._wall_of_state() - volumes.epoch_s
+        if len(path) < 2:  # a point: here, from now on
+            alt = self.position[2]
+            cells = 1000.0 / resolution
+            band = (
+                math.floor((alt - tolerance.altitude_m) * cells),
+                math.ceil((alt + tolerance.altitude_m) * cells),
+            )
+            return PathRoute(tuple(points), (band,), ((math.floor(since), T_RANGE_S),))
+        schedule = self._schedule(self.mission, self.flown, start, self.current_item)
+        bands, windows = route_volumes(schedule, start, len(path) - 1, resolution, since, tolerance)
+        return PathRoute(tuple(points), bands, windows)
 
     async def _answer(self, peer: int, session: int) -> None:
         """Answer a run request -- only once it has shown who asks (a trusted certificate, a
@@ -55,15 +79,28 @@ class BobAnswers(CompanionCore):
         signed refusal, never anything about our path."""
         setups = self.chooser_setups.setdefault(peer, {})
         self._answering += 1
+        waiting = False
         try:
             request = await self.endpoint.receive(peer, session)
             admitted = await self._admit(peer, session, request)
             if admitted is None:
                 return
             responder, hello, ticket = admitted
+            self._answers_waiting += 1
+            waiting = True
             async with self._radio.turn(ANSWER_NEAR if hello.horizon_m > 0 else ANSWER_FULL):
+                self._answers_waiting, waiting = self._answers_waiting - 1, False
                 self._sessions += 1
-                bob = Bob(self._bob_path, keys=self.bob_keys, setups=setups, geographic=True)
+                separation = run_volumes(
+                    self.settings.separation, hello.grid.resolution_mm, 0
+                ).separation
+                bob = Bob(
+                    self._bob_path,
+                    keys=self.bob_keys,
+                    setups=setups,
+                    geographic=True,
+                    separation=separation,
+                )
                 try:
                     with RunProgress(self.settings.node, self.endpoint, peer, Role.BOB):
                         report = await serve_bob(
@@ -91,6 +128,8 @@ class BobAnswers(CompanionCore):
             self.record(EventKind.ANSWER_FAILED, peer=peer, error=f"internal: {exc!r}")
             return
         finally:
+            if waiting:
+                self._answers_waiting -= 1
             self._answering -= 1
             self._wake.set()
             while len(setups) > SETUPS_PER_PEER:  # the oldest go first
@@ -162,6 +201,15 @@ class BobAnswers(CompanionCore):
                 await self._refuse(peer, session, responder, Refusal.ROLE)
                 return None
             self.record(EventKind.YIELDED, peer=peer, reason="the peer has the lower node id")
+        own = self._own_on_air
+        if (own is not None and own.n is None) or self._answers_waiting:
+            # Our own run holds the radio and still waits for its peer's first reply (a
+            # third drone, perhaps busy itself), or another answer already waits for the
+            # radio: a request kept waiting would keep its sender's radio idle too, a chain
+            # of drones each waiting on the next (radio.py).  Otherwise it waits: at most
+            # one answer behind a run that is under way.
+            await self._refuse(peer, session, responder, Refusal.BUSY)
+            return None
         operator = neighbour.operator
         allowed = min(operator.max_segments, 1 << min(known.beacon.size_class, MAX_SIZE_CLASS))
         if hello.m > allowed:  # more than its beacon announced or its operator allows

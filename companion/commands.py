@@ -165,6 +165,8 @@ async def run(args: argparse.Namespace) -> int:
             "link.serial": args.serial,
             "offset.offset_m": args.offset,
             "offset.max_altitude_m": args.max_altitude,
+            "separation.horizontal_m": args.separation,
+            "separation.vertical_m": args.vertical_separation,
         },
     )
     logs.setup(config.log_level, args.log_json, mavsdk=True)

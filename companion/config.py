@@ -46,11 +46,21 @@
     [failsafe]
     action = "climb"                      # "climb", "hold" or "off"
     margin_s = 10.0
+    [separation]                          # what a conflict is (a run uses both drones' larger)
+    horizontal_m = 15.0                   # segments closer than this, horizontally
+    vertical_m = 10.0                     # altitude bands closer than this
+    altitude_error_m = 1.0                # our own altitude uncertainty, either way
+    late_s = 15.0                         # our own timing uncertainty: this much later
+    early_s = 10.0                        # or this much earlier than predicted,
+    time_tolerance_rate = 0.15            # plus this share of the time ahead either way
+    # ground_wait_s = 600                 # on the ground: take-off within this long (then
+                                          # compare again); absent: not known, windows open
 """
 
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -68,6 +78,7 @@ from .failsafe import Action, FailsafeSettings
 from .link.airtime import PROFILES
 from .planner import OffsetSettings
 from .runtime import CompanionSettings, Credentials
+from .schedule import SeparationSettings, Tolerance
 from .tables import Table, TableError, load_toml
 
 PROFILE_NAMES = tuple(PROFILES)
@@ -176,6 +187,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     offset = doc.table("offset")
     limits = doc.table("limits")
     failsafe = doc.table("failsafe")
+    separation = doc.table("separation")
     node = doc.optional_integer("node", low=1, high=0xFFFE)
     transport = link.text("transport", "udp", ("udp", "serial"))
     profile_name = link.text("profile", "us915-sf7", PROFILE_NAMES)
@@ -226,6 +238,19 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         run_timeout_s=positive(limits, "run_timeout_s", 900.0),
         lookahead_s=positive(limits, "lookahead_s", 60.0, zero=True),
         failsafe=FailsafeSettings(Action(action), positive(failsafe, "margin_s", 10.0)),
+        separation=SeparationSettings(
+            positive(separation, "horizontal_m", 15.0, zero=True),
+            positive(separation, "vertical_m", 10.0, zero=True),
+            Tolerance(
+                positive(separation, "altitude_error_m", 1.0, zero=True),
+                positive(separation, "late_s", 15.0, zero=True),
+                positive(separation, "early_s", 10.0, zero=True),
+                positive(separation, "time_tolerance_rate", 0.15, zero=True),
+                positive(separation, "ground_wait_s", 1.0)
+                if "ground_wait_s" in separation.doc
+                else math.inf,
+            ),
+        ),
     )
     settings = LinkSettings(
         transport,

@@ -16,14 +16,16 @@ import logging
 import math
 import secrets
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from protocol.compact_plan import message_sizes
 from protocol.grid import GridSpec
-from protocol.intersection import BobKeys
+from protocol.intersection import Alice, BobKeys
 from protocol.ot.setup import DEFAULT_SECURITY, ChooserSetup, HolderSetup
+from protocol.volumes import CROSSING, VolumeSpec
 from protocol.wire import Suite
 
 from . import logs
@@ -36,17 +38,30 @@ from .beacon_budget import beacon_interval
 from .budget import RunLedger, RunLimits
 from .events import WARNINGS, Event, EventKind
 from .failsafe import FailsafeSettings, run_seconds
-from .flightpath import FlightPath
+from .flight_model import MAX_PREDICTION_S, Kinematics
+from .flightpath import FlightPath, flight_path
+from .levels import Slots
 from .link.endpoint import LinkEndpoint
-from .mission import MissionItem
+from .mission import NAV_LOITER_TIME, NAV_WAYPOINT, MissionItem
 from .neighbours import Neighbours
 from .peers import FRESH_S, Peer, distance_m, near_cut, time_to_meet
-from .planner import OffsetSettings
+from .planner import Edit, OffsetSettings
 from .radio import RadioTurns
 from .roles import Role
+from .schedule import (
+    Schedule,
+    SeparationSettings,
+    Vehicle,
+    off_schedule,
+    predict,
+    run_volumes,
+)
 from .state import StateStore
 
 log = logging.getLogger("companion")
+OVER_ITEM_M = 5.0  # this close to its current item's point, the vehicle is holding there
+TIMING_LOOK_S = 180.0  # how far ahead the timing watch predicts (the full schedule is kept)
+TIMING_EVERY_S = 5.0  # and how often
 NEAR_SEGMENTS = 2  # each side of a near run compares at least its next two segments
 SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one),
 SIGNED_EVERY = 30  # and at most every 30th beacon (a duty cycle stretches beacons to minutes)
@@ -63,7 +78,7 @@ class CompanionSettings:
     offset: OffsetSettings = field(default_factory=OffsetSettings)
     beacon_interval_s: float = 10.0
     initiation_range_m: float = 5000.0
-    grid_resolution_mm: int = 500
+    grid_resolution_mm: int = 2000  # 2 m cells: 15 m separation is 9 (docs/companion.md)
     grid_radius_m: float = 500.0  # smallest comparison box; doubled until it holds Alice's path
     max_box_radius_m: float = 64000.0  # largest box we answer in (as Bob): 40 m/s for 27 min
     min_grid_resolution_mm: int = 100  # finest grid we answer on (as Bob)
@@ -74,9 +89,13 @@ class CompanionSettings:
     max_clock_skew_s: float = 30.0  # beacons and run requests further off our clock: refused
     run_timeout_s: float | None = None
     retry_after_s: float = 30.0
+    busy_retry_s: tuple[float, float] = (5.0, 15.0)  # a peer busy with its own run: retry
+    # after a random wait in this range (drones refused by one busy peer do not all return
+    # at once)
     lookahead_s: float = 60.0  # the near run covers at least this much flight (0: no near run)
-    cruise_m_s: float = 10.0  # speed assumed for the look-ahead when nothing better is known
+    cruise_m_s: float = 10.0  # MPC_XY_CRUISE: the flight model's speed until the mission's own
     failsafe: FailsafeSettings = field(default_factory=FailsafeSettings)
+    separation: SeparationSettings = field(default_factory=SeparationSettings)
 
 
 @dataclass(frozen=True)
@@ -89,11 +108,13 @@ class Credentials:
     state_dir: Path
 
 
-def mission_version(path: FlightPath) -> int:
-    """16-bit digest of the ground track: altitude edits do not change it."""
+def mission_version(path: FlightPath, items: Sequence[MissionItem] = (), epoch: int = 0) -> int:
+    """16-bit digest of the path in four dimensions: the ground track, the items' altitudes
+    and the schedule's epoch (bumped when the drone falls behind or ahead of its windows)."""
     import hashlib
 
-    digest = hashlib.sha256(repr(path.points).encode()).digest()
+    flown = (path.points, [round(it.z, 2) for it in items], epoch)
+    digest = hashlib.sha256(repr(flown).encode()).digest()
     return int.from_bytes(digest[:2], "big")
 
 
@@ -105,10 +126,13 @@ def same_track(a: list[MissionItem], b: list[MissionItem]) -> bool:
     )
 
 
-def box_radius_m(path: list[tuple[int, int]], centre: tuple[int, int], minimum: float) -> float:
+def box_radius_m(
+    path: list[tuple[int, int]], centre: tuple[int, int], minimum: float, room_m: float = 0.0
+) -> float:
     """The comparison box's radius: ``minimum``, doubled until it holds the path with room
-    to spare (the box's edge then stays clear of Alice's path)."""
-    extent = max((distance_m(centre, p) for p in path), default=0.0) * 1.1 + 50.0
+    to spare (the box's edge then stays clear of Alice's path by more than ``room_m``, the
+    separation: Bob's path is cut to the box)."""
+    extent = max((distance_m(centre, p) for p in path), default=0.0) * 1.1 + 50.0 + room_m
     radius = minimum
     while radius < extent:
         radius *= 2
@@ -176,12 +200,24 @@ class CompanionCore:
         self.mission: list[MissionItem] = []
         self.home: tuple[int, int, float] | None = None  # lat, lon degE7, alt AMSL
         self.path = FlightPath(())  # the flown ground path of the original mission
-        self.levels: dict[int, int] = {}  # segment -> altitude level, as uploaded
+        self.raises: dict[int, float] = {}  # segment -> metres higher, as uploaded
+        self.edit: Edit | None = None  # the last verified upload (None: the original flies)
+        self.retimed = 0  # the schedule's epoch: bumped when the drone leaves its windows
+        self._timing: tuple[int, float, Schedule] | None = None  # (held mission, when, what)
+        self._over_item: tuple[int, float] | None = None  # (current item, over it since)
+        self._progress_seen: tuple[int, int, float] = (0, 0, 0.0)  # (current, of, when)
+        self._planned: Schedule | None = None  # the original mission from the ground
+        self._ground_since: float | None = None  # on the ground: since when its windows hold
+        self._ground_retimes = 0  # ... and how often they were moved on there (each doubles)
         self.flagged: set[int] = set()  # segments the comparisons found in conflict
         self.precaution: dict[int, set[int]] = {}  # peer -> segments climbed as a precaution
         self.position: tuple[int, int, float] = (0, 0, 0.0)  # lat, lon degE7, alt AMSL
+        self.position_at = 0.0  # when it came (link seconds): the state a prediction starts at
         self.relative_alt = 0.0
+        self.armed = False
         self.speed_m_s = 0.0
+        self.climb_m_s = 0.0  # vertical speed, up
+        self.held = False  # holding in the air (paused, or the mission over): flies on when?
         self.current_item = 0
         self.has_flown = False  # airborne at least once since the companion started
         self._heard_autopilot = time.monotonic()  # the last position (real seconds)
@@ -198,6 +234,8 @@ class CompanionCore:
         self._answering = 0  # runs we answer as Bob
         self._holding: set[int] = set()  # peers we hold for
         self._running: tuple[int, float] | None = None  # our run's peer, its expected end
+        self._own_on_air: Alice | None = None  # our own run's machine while it holds the radio
+        self._answers_waiting = 0  # admitted answers waiting for the radio (at most one)
         self._ground_wait: float | None = None  # since when a run waits for a quiet channel
         self.epoch = 0.0
 
@@ -239,11 +277,14 @@ class CompanionCore:
 
     @property
     def on_ground(self) -> bool:
-        return self.relative_alt < 1.0
+        """On the ground and not leaving it: an armed vehicle below 1 m is taking off (a
+        departure is flight: its runs are in-flight runs)."""
+        return self.relative_alt < 1.0 and not self.armed
 
     @property
     def version(self) -> int:
-        return mission_version(self.path)
+        """What our beacons announce: the mission the vehicle holds, in four dimensions."""
+        return mission_version(self.flown, self.mission, self.retimed)
 
     @property
     def beacon_interval(self) -> float:
@@ -286,7 +327,7 @@ class CompanionCore:
             return False
         if distance_m(self.position[:2], peer.position) > self.settings.initiation_range_m:
             return False
-        return peer.compared != (peer.beacon.mission_version, self.version)
+        return peer.compared != (peer.beacon.mission_version, self.compare_version)
 
     def _peer_speed(self, peer: Peer) -> float:
         """The speed the fail-safe assumes for a peer: its measured speed, at least the
@@ -320,22 +361,264 @@ class CompanionCore:
         )
 
     def _remaining_path(self) -> tuple[int, list[tuple[int, int]]]:
-        """The path still to fly: all of it before the first take-off; in flight from the
-        leg to the current item; landed after flying, from there on -- and nothing (the
-        landing point) once the current item is the last one on the path, so a drone whose
-        mission is over never compares, as Alice, a path it will not fly again."""
+        """The path still to fly, of the *original* mission (what Alice compares: her edits
+        are made on top of it)."""
+        return self._remaining(self.path, self.original_current)
+
+    def _remaining_flown(self) -> tuple[int, list[tuple[int, int]]]:
+        """The path still to fly, of the mission the vehicle holds (what Bob answers with)."""
+        return self._remaining(self.flown, self.current_item)
+
+    def _remaining(self, path: FlightPath, current: int) -> tuple[int, list[tuple[int, int]]]:
+        """All of ``path`` before the first take-off; in flight from the leg to the current
+        item; landed after flying, from there on -- and nothing (the landing point) once the
+        current item is the last one on the path, so a drone whose mission is over never
+        compares, as Alice, a path it will not fly again."""
         if self.on_ground and not self.has_flown:
-            return 0, self.path.points
-        start = self.path.start_at(self.current_item)
-        points = self.path.points[start:]
-        last = max((i for v in self.path.vertices for i in v.items), default=0)
-        if self.on_ground and self.current_item >= last:
-            return len(self.path.points) - 1, points[-1:]
+            return 0, path.points
+        start = path.start_at(current)
+        points = path.points[start:]
+        last = max((i for v in path.vertices for i in v.items), default=0)
+        if self.on_ground and current >= last:
+            return len(path.points) - 1, points[-1:]
         return start, points
+
+    @property
+    def original_current(self) -> int:
+        """The vehicle's current item as an item of the original mission."""
+        if self.edit is None:
+            return self.current_item
+        origin = self.edit.origin
+        return origin[min(max(self.current_item, 0), len(origin) - 1)] if origin else 0
+
+    @property
+    def flown(self) -> FlightPath:
+        """The flown ground path of the mission the vehicle holds (an inserted waypoint
+        is a vertex of its own)."""
+        if self.edit is None or self.edit.inserted is None:
+            return self.path
+        home = None if self.home is None else self.home[:2]
+        return flight_path(self.mission, home, ardupilot=self.settings.ardupilot)
+
+    @property
+    def compare_version(self) -> int:
+        """The version of what we compare as Alice (the original mission, on our schedule)."""
+        return mission_version(self.path, self.original, self.retimed)
+
+    @property
+    def kinematics(self) -> Kinematics:
+        return Kinematics(cruise_m_s=self.settings.cruise_m_s)
+
+    def _home_deg(self) -> tuple[float, float, float]:
+        """Home (degrees, metres AMSL): PX4's HOME_POSITION, ArduPilot's item 0, or else
+        where the vehicle is, at the altitude its relative altitude counts from."""
+        if self.home is not None:
+            return self.home[0] / 1e7, self.home[1] / 1e7, self.home[2]
+        if self.settings.ardupilot and self.mission:
+            first = self.mission[0]
+            return first.x / 1e7, first.y / 1e7, first.z
+        lat, lon, alt = self.position
+        return lat / 1e7, lon / 1e7, alt - self.relative_alt
+
+    def _schedule(
+        self,
+        items: list[MissionItem],
+        path: FlightPath,
+        start: int,
+        current: int,
+        limit_s: float = MAX_PREDICTION_S,
+    ) -> Schedule:
+        """``path`` (the flown path of ``items``) in four dimensions from vertex ``start``,
+        as the flight model flies ``items`` on from where the vehicle is now."""
+        home = self._home_deg()
+        lat, lon = self.position[0] / 1e7, self.position[1] / 1e7
+        if self.position[:2] == (0, 0):
+            lat, lon = home[0], home[1]
+        loitering = 0.0
+        if self._over_item is not None and self._over_item[0] == self.current_item:
+            loitering = self.position_at - self._over_item[1]
+        vehicle = Vehicle(
+            lat,
+            lon,
+            self.relative_alt,
+            self.speed_m_s,
+            current,
+            self.on_ground,
+            loitering,
+            self.climb_m_s,
+            self.held and not self.on_ground,
+            self._ground_wait_left(),
+        )
+        return predict(
+            path,
+            items,
+            home,
+            start,
+            vehicle,
+            self.kinematics,
+            home_is_item0=self.settings.ardupilot,
+            limit_s=limit_s,
+        )
+
+    def _ground_allowance(self) -> float:
+        """How long a drone on the ground is assumed to wait before it takes off, counted
+        from :attr:`_ground_since`: the tolerance's, doubled at each move on the ground."""
+        return self.settings.separation.tolerance.ground_wait_s * 2.0**self._ground_retimes
+
+    def _ground_wait_left(self) -> float:
+        """On the ground: how much longer it may wait before it takes off and still fly
+        within the windows its peers hold (infinite: not on the ground -- or more than half
+        the wait is over and :meth:`_keep_time` has not moved it on yet: then when it takes
+        off is not known)."""
+        if not self.on_ground or self.has_flown:
+            return math.inf
+        now = self.clock.now()
+        if self._ground_since is None:
+            self._ground_since = now
+        left = self._ground_since + self._ground_allowance() - now
+        return left if left >= self._ground_allowance() / 2 else math.inf
+
+    def _wall_of_state(self) -> float:
+        """The wall time of the vehicle state predictions start from (its last position)."""
+        if self.position_at == 0.0:
+            return self.clock.wall()
+        return self.clock.wall() - (self.clock.now() - self.position_at)
+
+    def _note_position(self) -> None:
+        """Since when the vehicle has been over its current item's point (a loiter's or a
+        waypoint's hold time under way, which the schedule counts down from there)."""
+        i = self.current_item
+        item = self.mission[i] if not self.on_ground and 0 <= i < len(self.mission) else None
+        if (
+            item is None
+            or item.command not in (NAV_LOITER_TIME, NAV_WAYPOINT)
+            or not item.has_position
+            or distance_m(self.position[:2], (item.x, item.y)) > OVER_ITEM_M
+        ):
+            self._over_item = None
+        elif self._over_item is None or self._over_item[0] != i:
+            self._over_item = (i, self.position_at)
+
+    def _keep_time(self) -> None:
+        """Compare again when the vehicle has left the windows it announced: against the
+        schedule predicted at take-off, at the last edit or the last re-timing, a short
+        prediction from where it is now shows whether it is off by half the tolerance
+        (:func:`companion.schedule.off_schedule`); then the schedule's epoch (part of our
+        version) moves on and every peer is due a run again.  On the ground the windows
+        assume a take-off within a wait (:meth:`_ground_allowance`): once half of it has passed
+        with the drone still there, they move on, the wait doubled.  The paper suite has no
+        windows: nothing to keep."""
+        if self._edit_lock.locked():  # the mission and its current item are changing
+            return
+        if not self.on_ground or self.has_flown:  # (landed: its mission is over)
+            self._ground_since, self._ground_retimes = None, 0
+        elif self.settings.suite is Suite.COMPACT:
+            now = self.clock.now()
+            if self._ground_since is None:
+                self._ground_since = now
+            elif now - self._ground_since > self._ground_allowance() / 2:
+                self._ground_since = now
+                self._ground_retimes += 1
+                self._retime(0.0, ground=True)
+        if self.held and not self.on_ground and self.settings.suite is Suite.COMPACT:
+            # Holding: when it flies on is unknown, its windows are open to the end from now
+            # on (as on the ground).  Once, when the hold begins, its peers compare again.
+            if self._timing is not None:
+                self._timing = None
+                self._retime(0.0)
+            return
+        if self.on_ground or self.relative_alt < 1.0 or self.settings.suite is not Suite.COMPACT:
+            self._timing = None  # (armed on the ground: the spool-up's length is unknown)
+            return
+        start, points = self._remaining_flown()
+        if len(points) < 2:
+            return
+        key = mission_version(self.flown, self.mission)
+        now = self.position_at  # the predictions start from the vehicle's state then
+        if self._timing is None or self._timing[0] != key:
+            full = self._schedule(self.mission, self.flown, start, self.current_item)
+            self._timing = (key, now, full)
+            return
+        _, then, before = self._timing
+        soon = self._schedule(
+            self.mission, self.flown, start, self.current_item, limit_s=TIMING_LOOK_S
+        )
+        drift = off_schedule(before, then, soon, now, self.settings.separation.tolerance)
+        if drift is None:
+            return
+        full = self._schedule(self.mission, self.flown, start, self.current_item)
+        self._timing = (key, now, full)
+        self._retime(drift)
+
+    def _retime(self, drift: float, *, ground: bool = False) -> None:
+        """Our windows moved (``drift`` seconds late; 0: a hold began, they are open to the
+        end; ``ground``: still on the ground after half its wait): a new schedule epoch, a
+        new version, every peer compares again."""
+        self.retimed += 1
+        self.record(
+            EventKind.RETIMED,
+            epoch=self.retimed,
+            drift_s=round(drift, 1),
+            held=drift == 0.0 and not ground,
+            on_ground=ground,
+        )
+        self._beacon_now.set()
+
+    def _decided(self, peer: Peer) -> set[int]:
+        """Our segments whose comparison with ``peer`` stands: those settled (a full run
+        compared them, or we leave them before the peer could come near), those a run found
+        in conflict (a hit with part of its path is a hit with all of it), and those a near
+        run cleared that we leave before the peer can be past the end of the path it showed
+        (its horizon at its speed, at least cruise, less the margin).  A segment only a near
+        run cleared is open again once that may no longer hold: the fail-safe watches it
+        (:func:`companion.failsafe.at_risk`)."""
+        decided = peer.settled | (peer.covered & peer.conflicts)
+        near = peer.covered - decided
+        if not near or peer.near_run is None:
+            return decided
+        started, horizon = peer.near_run
+        speed = max(self._peer_speed(peer), self.settings.cruise_m_s)
+        beyond = started + horizon / speed - self.clock.now() - self.settings.failsafe.margin_s
+        if self.on_ground and not self.has_flown:
+            return decided  # (take-off time unknown: windows never close)
+        start = self._remaining_path()[0]
+        decided |= {k for k in near if k < start}  # flown already
+        near = {k for k in near if k >= start}
+        if not near:
+            return decided
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        tolerance = self.settings.separation.tolerance
+        for k in near:
+            try:
+                if schedule.window(k, tolerance)[1] < beyond:
+                    decided.add(k)
+            except IndexError:  # beyond the scheduled path
+                continue
+        return decided
+
+    def _volumes(self, grid: GridSpec, epoch_s: int = 0) -> VolumeSpec:
+        """The volume parameters of our runs on ``grid`` (the compact suite's; the paper
+        suite compares the crossing only)."""
+        if self.settings.suite is not Suite.COMPACT:
+            return CROSSING
+        return run_volumes(self.settings.separation, grid.resolution_mm, epoch_s)
+
+    def _slots(self) -> Slots:
+        """The altitude slots the rest of our flight occupies, as the vehicle flies it."""
+        start, points = self._remaining_flown()
+        if len(points) < 2:
+            return Slots.of([(self.position[2], self.position[2])])
+        schedule = self._schedule(self.mission, self.flown, start, self.current_item)
+        tolerance = self.settings.separation.tolerance
+        return Slots.of(
+            schedule.cruise(k, tolerance) for k in range(start, start + len(points) - 1)
+        )
 
     def _grid(self, path: list[tuple[int, int]]) -> GridSpec:
         lat, lon = self.position[:2]
-        radius = box_radius_m(path, (lat, lon), self.settings.grid_radius_m)
+        radius = box_radius_m(
+            path, (lat, lon), self.settings.grid_radius_m, self.settings.separation.horizontal_m
+        )
         return GridSpec.geo(
             lat, lon, resolution_mm=self.settings.grid_resolution_mm, radius_m=radius
         )
@@ -352,7 +635,12 @@ class CompanionCore:
         if self.settings.suite is not Suite.COMPACT:
             return 0.0
         sizes = message_sizes(
-            m, m if n is None else n, grid, fresh_setup=fresh, ot_security=self.settings.ot_security
+            m,
+            m if n is None else n,
+            grid,
+            fresh_setup=fresh,
+            ot_security=self.settings.ot_security,
+            volumes=self._volumes(grid),
         )[skip:]
         return run_seconds(
             sizes,

@@ -1,10 +1,11 @@
 """What the companion changes on its drone: altitude edits and precautions.
 
-Conflicts (from Alice's runs) and precautions become altitude levels
-(:func:`companion.levels.plan_levels`) and an uploaded, read-back mission edit
-(:func:`companion.planner.plan_offsets`).  The fail-safe (:mod:`companion.failsafe`) watches
-every run under way and every peer still waiting for one: when a result could come too late
-it climbs over, or holds before, the segments within the peer's reach until the result is in.
+Conflicts (from Alice's runs) and precautions become raises clear of the peers' altitude
+slots (:func:`companion.levels.plan_raises`) and an uploaded, read-back mission edit that
+flies each raised segment at its raise from end to end (:func:`companion.planner.plan_edit`).
+The fail-safe (:mod:`companion.failsafe`) watches every run under way and every peer still
+waiting for one: when a result could come too late it climbs over, or holds before, the
+segments within the peer's reach until the result is in.
 """
 
 from __future__ import annotations
@@ -18,10 +19,13 @@ from .autopilot import AutopilotError
 from .core import CompanionCore, same_track
 from .events import EventKind
 from .failsafe import Action, at_risk, too_late
-from .levels import levels_mask, plan_levels
+from .flightpath import DO_JUMP
+from .levels import NoClearAltitude, plan_raises
 from .mission import MissionError
 from .peers import Peer
-from .planner import PlannerError, fixed_segments, plan_offsets
+from .planner import Edit, PlannerError, fixed_segments, plan_edit
+from .planner import Vehicle as PlanVehicle
+from .schedule import Vehicle, predict
 
 
 class Edits(CompanionCore):
@@ -94,9 +98,12 @@ class Edits(CompanionCore):
             return  # (on the ground the drone waits for its comparisons anyway)
         start, path = self._remaining_path()
         speed = max(self.speed_m_s, self.settings.cruise_m_s)
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        tolerance = self.settings.separation.tolerance
+        entered = [schedule.window(k, tolerance)[0] for k in range(start, start + len(path) - 1)]
         risky = at_risk(
             path, start, self._here(), speed, peer.position, self._peer_speed(peer), needed,
-            settings, peer.covered, peer_age_s=self._silent_for(peer),
+            settings, self._decided(peer), peer_age_s=self._silent_for(peer), entered=entered,
         )  # fmt: skip
         if not risky:
             return
@@ -147,52 +154,109 @@ class Edits(CompanionCore):
                 except AutopilotError as exc:
                     self.record(EventKind.RESUME_FAILED, peer=peer.node, error=str(exc))
 
-    async def _replan(self, why: str) -> None:
-        """Upload the altitude levels the conflicts and precautions call for, if they changed."""
-        async with self._edit_lock:
-            levels = plan_levels(
-                {node: p.conflicts for node, p in self.peers.items()},
-                self.precaution,
-                {node: p.beacon.levels for node, p in self.peers.items()},
+    def _planned_bands(self) -> dict[int, tuple[float, float]]:
+        """Every segment's band off the ground as planned (the original mission flown from
+        the ground), widened by our altitude error: what a raise starts from."""
+        if self._planned is None:
+            self._planned = predict(
+                self.path,
+                self.original,
+                self._home_deg(),
+                0,
+                Vehicle(*self._home_deg()[:2], 0.0, 0.0, 1 if self.settings.ardupilot else 0, True),
+                self.kinematics,
+                home_is_item0=self.settings.ardupilot,
             )
-            if levels == self.levels:
+        tolerance = self.settings.separation.tolerance
+        return {k: self._planned.cruise(k, tolerance) for k in range(self.path.segments)}
+
+    def _ahead(self, raises: dict[int, float]) -> dict[int, float]:
+        """The raises of the segments not flown yet (all of them before take-off)."""
+        first, _ = self._remaining_path()
+        return {k: v for k, v in raises.items() if k >= first}
+
+    def _edit_vehicle(self) -> PlanVehicle:
+        lat, lon, amsl = self.position
+        segment = None if self.on_ground else self.path.start_at(self.original_current)
+        lead = max(self.speed_m_s, 1.0) / self.kinematics.climb_m_s
+        return PlanVehicle(segment, lat, lon, self.relative_alt, amsl, lead)
+
+    async def _replan(self, why: str) -> None:
+        """Upload the raises the conflicts and precautions call for, if they changed."""
+        async with self._edit_lock:
+            offset = self.settings.offset
+            try:
+                raises = plan_raises(
+                    {node: p.conflicts for node, p in self.peers.items()},
+                    self.precaution,
+                    {node: p.beacon.slots for node, p in self.peers.items()},
+                    self._planned_bands(),
+                    offset.offset_m,
+                    self.settings.separation.vertical_m,
+                    1.0 if offset.direction == "up" else -1.0,
+                )
+            except NoClearAltitude as exc:
+                self.record(EventKind.PLAN_FAILED, error=str(exc))
+                return
+            # A raise only grows while its conflict stands: a peer whose announced slots
+            # shrink (it flew on, it landed) is no reason for another edit in flight.
+            raises = {k: max(v, self.raises.get(k, v), key=abs) for k, v in raises.items()}
+            if self._ahead(raises) == self._ahead(self.raises):
                 return
             try:
-                planned = plan_offsets(self.original, levels, self.settings.offset, path=self.path)
+                edit = plan_edit(
+                    self.original, raises, offset, path=self.path, vehicle=self._edit_vehicle()
+                )
             except PlannerError as exc:
                 self.record(EventKind.PLAN_FAILED, error=str(exc))
                 return
-            fixed = fixed_segments(self.path, levels)
-            if fixed:  # e.g. the launch leg to a take-off point: nothing there may move
+            fixed = fixed_segments(self.path, raises)
+            if fixed:  # e.g. the last leg into a landing: its end may not move
                 self.record(EventKind.FIXED_SEGMENTS, segments=fixed, why=why)
             try:
                 # The edit is built on what the vehicle holds now and keeps the item it is
                 # flying: PX4 restarts a mission at the item an upload marks current.
                 held = await self.autopilot.download()
-                if not same_track(held, self.original):
+                before = self.edit.items if self.edit is not None else self.original
+                if not same_track(held, before):
                     raise AutopilotError("the vehicle's mission changed since the start")
                 current = max(
                     self.current_item, next((i for i, it in enumerate(held) if it.current), 0)
                 )
                 current = min(current, len(held) - 1)
+                original = self.edit.origin[current] if self.edit is not None else current
+                mark = edit.inserted if edit.inserted is not None else edit.index_of(original)
+                new = []
+                for i, planned in enumerate(edit.items):
+                    if i == edit.inserted:
+                        new.append(planned.replace(current=int(i == mark)))
+                        continue
+                    source = self.edit.index_of(edit.origin[i]) if self.edit else edit.origin[i]
+                    new.append(held[source].replace(seq=i, z=planned.z, current=int(i == mark)))
                 new = [
-                    h.replace(z=p.z, current=int(i == current))
-                    for i, (h, p) in enumerate(zip(held, planned, strict=True))
-                ]
+                    it.replace(param1=edit.items[i].param1) if it.command == DO_JUMP else it
+                    for i, it in enumerate(new)
+                ]  # jump targets as the edit numbers them
+                sent_at = self.clock.now()
                 await self.autopilot.replace_mission(new, held)
             except (AutopilotError, MissionError) as exc:
                 self.record(EventKind.UPLOAD_FAILED, error=str(exc))
                 return
-            announce = levels_mask(levels) != levels_mask(self.levels)
-            self.mission, self.levels = new, levels
-            if announce:  # peers choose their levels around ours: tell them now, not in
-                self._beacon_now.set()  # minutes (a duty-cycled beacon interval)
+            self.mission, self.raises = new, raises
+            # Where the vehicle flies on: what it reported since the upload, or the item
+            # the upload marked (PX4 goes on from there; its report may not have come yet).
+            seen, total, when = self._progress_seen
+            self.current_item = seen if when >= sent_at and total == len(new) else mark
+            self.edit = Edit(new, edit.origin, edit.inserted)
+            self._beacon_now.set()  # peers keep clear of our slots: tell them now, not in
+            # minutes (a duty-cycled beacon interval)
             self.flagged = {k for p in self.peers.values() for k in p.conflicts}
             self.record(
                 EventKind.UPLOADED,
-                flagged=sorted(levels),
-                levels={str(k): v for k, v in sorted(levels.items())},
+                flagged=sorted(raises),
+                raises={str(k): v for k, v in sorted(raises.items())},
                 verified=True,
-                offset_m=self.settings.offset.delta,
+                offset_m=offset.delta,
+                inserted=edit.inserted,
                 why=why,
             )

@@ -25,6 +25,7 @@ class EventKind(StrEnum):
     RESULT = "result"  # a run ended with an answer
     RUN_FAILED = "run_failed"  # a run ended without one (retried later)
     YIELDED = "yielded"  # the peer is Alice for this pair
+    PEER_BUSY = "peer_busy"  # the peer refused: its own run is on the air (asked again soon)
     SETUP_RENEWED = "setup_renewed"  # the peer lost our OT setup: a fresh one
     # runs as Bob
     REFUSED = "refused"  # a request refused before any work
@@ -40,6 +41,7 @@ class EventKind(StrEnum):
     HOLD_FAILED = "hold_failed"
     RESUMED = "resumed"
     RESUME_FAILED = "resume_failed"
+    RETIMED = "retimed"  # off its predicted windows by half the tolerance: compare again
     # the process itself
     TASK_FAILED = "task_failed"  # one of the companion's tasks raised
 
@@ -84,7 +86,13 @@ FAILED = frozenset(
 )
 # runs as Alice that ended, one way or the other
 RUN_ENDS = frozenset(
-    {EventKind.RESULT, EventKind.RUN_FAILED, EventKind.YIELDED, EventKind.SETUP_RENEWED}
+    {
+        EventKind.RESULT,
+        EventKind.RUN_FAILED,
+        EventKind.YIELDED,
+        EventKind.SETUP_RENEWED,
+        EventKind.PEER_BUSY,
+    }
 )
 
 

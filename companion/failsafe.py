@@ -90,17 +90,23 @@ def at_risk(
     decided: set[int] | frozenset[int] = frozenset(),
     *,
     peer_age_s: float = 0.0,
+    entered: Sequence[float] | None = None,
 ) -> list[int]:
     """Segments (``first`` + k of ``path``) a precaution must cover if the result may take
-    ``seconds`` more: those the peer could reach by then *and* we enter by then (each drone
-    flying at least ``floor_m_s``, plus the margin); a segment we enter later hears the
-    result first, and ``decided`` ones (a finished run compared them) need nothing.  The
+    ``seconds`` more: those the peer could reach by then *and* we enter by then, plus the
+    margin; a segment we enter later hears the result first, and ``decided`` ones (a
+    finished run compared them) need nothing.  When we enter ours is ``entered`` (the
+    earliest second from now of each, the start of its time window: the schedule's, the
+    same the runs compare); without it, each drone flying at least ``floor_m_s``.  The
     peer's position is ``peer_age_s`` old: it may have flown that long already."""
     window = seconds + settings.margin_s
     reach = (
         max(peer_speed_m_s, settings.floor_m_s) * (window + max(peer_age_s, 0.0))
         + settings.reach_margin_m
     )
-    ahead = max(own_speed_m_s, settings.floor_m_s) * window + settings.reach_margin_m
-    ours = reached_within(path, first, here, ahead)
+    if entered is not None:
+        ours = {first + k for k, start in enumerate(entered) if start <= window}
+    else:
+        ahead = max(own_speed_m_s, settings.floor_m_s) * window + settings.reach_margin_m
+        ours = reached_within(path, first, here, ahead)
     return [k for k in segments_within(path, first, peer, reach) if k in ours and k not in decided]

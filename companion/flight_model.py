@@ -233,6 +233,18 @@ class Flight:
         self.armed = self.flying = self.mission_running = True
         self.holding = False
 
+    def loitering(self, for_s: float) -> None:
+        """The vehicle has been over its current item's point for ``for_s`` seconds (a
+        loiter's or a waypoint's hold time under way): it leaves when that time is up."""
+        if not 0 <= self.current < len(self.items) or for_s <= 0:
+            return
+        item = self.items[self.current]
+        if item.command not in (NAV_LOITER_TIME, NAV_WAYPOINT) or not item.has_position:
+            return
+        wait = item.param1 if math.isfinite(item.param1) else 0.0
+        self.reached.append(Reached(self.current, self.t - for_s, self.alt))
+        self._hold_until = self.t - for_s + max(wait, 0.0)
+
     def hold(self) -> None:
         """Pause where the vehicle is (it brakes to a hover)."""
         self.mission_running, self.holding = False, True
@@ -379,7 +391,9 @@ class Flight:
         """The items still to be reached, flown to the end of the mission on a copy (times
         in this flight's seconds; a loiter without end closes the prediction)."""
         future = copy.copy(self)
-        future.reached, future._jumps = [], dict(self._jumps)
+        holding = self._hold_until is not None and self.reached and self.reached[-1].left is None
+        future.reached = [self.reached[-1]] if holding else []  # a hold time under way
+        future._jumps = dict(self._jumps)
         future.on_reached = future.on_current = None
         if not future.flying:
             future.start()

@@ -1,60 +1,124 @@
-"""Altitude levels when several drones share the airspace (pure).
+"""Altitudes that keep clear of conflicting peers (pure).
 
-A pair of drones is deconflicted by Alice flying her conflicting segments at an offset while
-Bob keeps his altitude.  With three or more drones one drone can be Alice to one peer and Bob to
-another, and two climbing drones must not end up at the same height.  So climbs come in
-*levels* (level L flies L offsets above the plan) and every beacon carries the set of levels
-its drone flies anywhere on its remaining path.  A segment Alice must leave for peers P flies
-at the lowest level >= 1 that none of P announces; when a peer announces a new level, Alice
-re-plans.  With the lower node id as Alice among airborne drones the choices settle from the
-highest id down (a drone that is only ever Bob stays at level 0).
+A pair of drones is deconflicted by Alice flying her conflicting segments higher while Bob
+keeps his altitude.  How much higher is decided in absolute altitude: every beacon announces
+the altitude *slots* (5 m of AMSL each) that its drone's remaining path occupies as it flies
+it -- its own raises included, each band widened by its altitude error, its take-off and
+landing columns left out (they lie below the altitudes it flies next to them) -- and a
+flagged segment is raised by the least multiple of 5 m that is at least the offset and keeps
+its band at least the vertical separation clear of every slot its conflicting peers announce:
+above each peer's lowest (and so above its climbs and descents), and above or below each
+other one.  So a drone crossing one that cruises 5 m higher
+climbs past it with the separation, never into its altitude; a peer whose band is already
+clear is no conflict at all (the comparison's bands say so).  With three or more drones a
+drone can be Alice to one peer and Bob to another: each announces its new slots at once, and
+a drone that must stay clear of them re-plans.
+
+What a peer learns: which 5 m slots the drone occupies somewhere on its remaining path -- not
+where, not which segment, not its altitude to better than 5 m (its beacon's current altitude
+already says where it is now).  That is what choosing a clear altitude needs.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 
-MAX_LEVEL = 7  # levels 1..7 fit the beacon's byte
-
-
-def levels_mask(levels: Mapping[int, int]) -> int:
-    """Bit L set for every level L >= 1 used (the beacon field)."""
-    mask = 0
-    for level in levels.values():
-        if 1 <= level <= MAX_LEVEL:
-            mask |= 1 << level
-    return mask & 0xFF
+SLOT_M = 5.0
+BASE_M = -1000.0  # slot 0 starts here (AMSL)
+SLOTS = 32  # announced per beacon, from the lowest occupied; the last means "and above"
+MAX_RAISE_M = 300.0
 
 
-def assign(conflicts: Mapping[int, set[int]], masks: Mapping[int, int]) -> dict[int, int]:
-    """Segment -> level for ``conflicts`` (peer -> Alice's segments that meet its path),
-    avoiding every level the peers of that segment announce (``masks``, peer -> mask)."""
-    out: dict[int, int] = {}
-    peers_of: dict[int, set[int]] = {}
-    for peer, segments in conflicts.items():
-        for segment in segments:
-            peers_of.setdefault(segment, set()).add(peer)
-    for segment, peers in peers_of.items():
-        taken = 0
-        for peer in peers:
-            taken |= masks.get(peer, 0)
-        level = 1
-        while level < MAX_LEVEL and taken >> level & 1:
-            level += 1
-        out[segment] = level
-    return out
+class NoClearAltitude(ValueError):
+    """No raise up to MAX_RAISE_M keeps the band clear of the peers' slots."""
 
 
-def plan_levels(
+@dataclass(frozen=True, slots=True)
+class Slots:
+    """Occupied altitude slots: bit i of ``mask`` is slot ``base + i``
+    ([BASE_M + (base + i) SLOT_M, + SLOT_M) metres AMSL); bit 31 covers everything above."""
+
+    base: int = 0
+    mask: int = 0
+
+    @classmethod
+    def of(cls, bands: Iterable[tuple[float, float]]) -> Slots:
+        """The slots the closed altitude bands (metres AMSL) touch."""
+        spans = [
+            (math.floor((lo - BASE_M) / SLOT_M), math.floor((hi - BASE_M) / SLOT_M))
+            for lo, hi in bands
+        ]
+        if not spans:
+            return cls()
+        base = max(min(lo for lo, _ in spans), 0)
+        mask = 0
+        for lo, hi in spans:
+            for slot in range(max(lo, base), hi + 1):
+                mask |= 1 << min(slot - base, SLOTS - 1)
+        return cls(min(base, 0xFFFF), mask)
+
+    def intervals(self) -> list[tuple[float, float]]:
+        """The occupied altitudes (metres AMSL) as closed intervals, merged."""
+        out: list[tuple[float, float]] = []
+        for i in range(SLOTS):
+            if not self.mask >> i & 1:
+                continue
+            low = BASE_M + (self.base + i) * SLOT_M
+            high = math.inf if i == SLOTS - 1 else low + SLOT_M
+            if out and out[-1][1] >= low:
+                out[-1] = (out[-1][0], high)
+            else:
+                out.append((low, high))
+        return out
+
+
+def clear_raise(
+    band: tuple[float, float],
+    peers: Iterable[Slots],
+    offset_m: float,
+    vertical_m: float,
+    direction: float = 1.0,
+) -> float:
+    """The least raise (a multiple of SLOT_M, at least ``offset_m``; negative for
+    ``direction`` -1) after which ``band`` is at least ``vertical_m`` clear of every peer's
+    slots: above its lowest occupied interval, above or below each other one."""
+    occupied = [slots.intervals() for slots in peers]
+    steps = math.ceil(offset_m / SLOT_M)
+    while steps * SLOT_M <= MAX_RAISE_M:
+        delta = direction * steps * SLOT_M
+        low, high = band[0] + delta, band[1] + delta
+        if all(
+            low >= top + vertical_m or (k > 0 and high <= bottom - vertical_m)
+            for spans in occupied
+            for k, (bottom, top) in enumerate(spans)
+        ):
+            return delta
+        steps += 1
+    raise NoClearAltitude(f"no altitude within {MAX_RAISE_M:.0f} m clears the peers' slots")
+
+
+def plan_raises(
     conflicts: Mapping[int, set[int]],
     precautions: Mapping[int, set[int]],
-    masks: Mapping[int, int],
-) -> dict[int, int]:
-    """Segment -> level for the conflicts found and the precautions taken (peer -> segments):
-    a precaution is a conflict until its result is in, so its level too avoids what the
-    peers announce (two drones that climb for each other, or for a third, must not meet
-    one offset up)."""
-    merged = {peer: set(segments) for peer, segments in conflicts.items() if segments}
-    for peer, segments in precautions.items():
-        merged[peer] = merged.get(peer, set()) | segments
-    return assign(merged, masks)
+    slots: Mapping[int, Slots],
+    bands: Mapping[int, tuple[float, float]],
+    offset_m: float,
+    vertical_m: float,
+    direction: float = 1.0,
+) -> dict[int, float]:
+    """Segment -> raise (metres) for the conflicts found and the precautions taken (peer ->
+    segments): each clear of the slots of the peers it conflicts with (``slots``, peer ->
+    announced), its band (``bands``: the segment's planned band, AMSL) raised.  A precaution
+    is a conflict until its result is in."""
+    peers_of: dict[int, set[int]] = {}
+    for table in (conflicts, precautions):
+        for peer, segments in table.items():
+            for segment in segments:
+                peers_of.setdefault(segment, set()).add(peer)
+    out: dict[int, float] = {}
+    for segment, peers in sorted(peers_of.items()):
+        announced = [slots.get(peer, Slots()) for peer in peers]
+        out[segment] = clear_raise(bands[segment], announced, offset_m, vertical_m, direction)
+    return out

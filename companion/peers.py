@@ -87,12 +87,19 @@ class Peer:
     role: Role | None = None  # once this pair has met: roles then stay
     compared: tuple[int, int] | None = None  # (peer's, our) mission versions of the last run
     next_try: float = 0.0
+    retry_in: float | None = None  # after a run without result: retry this soon (None: the
+    # settings' retry_after_s)
     conflicts: set[int] = field(default_factory=set)  # our segments that meet its path
     plan: list[tuple[str, int]] = field(default_factory=list)  # runs still to do (phase, horizon)
     plan_version: tuple[int, int] | None = None  # the versions the plan was made for
     covered: set[int] = field(default_factory=set)  # our segments a finished run compared
+    settled: set[int] = field(default_factory=set)  # ... for good: a full run compared
+    # them, or we leave them before the peer could come near (a near run left them out)
     full_after: float = 0.0  # link time before which the full run waits
-    gap_m: float | None = None  # distance to us when last heard
+    full_left: bool = False  # the last full run compared only the urgent part: more to do
+    near_run: tuple[float, int] | None = None  # the last near run: (started at, horizon m)
+    rate_from: tuple[float, tuple[int, int], float] | None = None  # (when, where, distance
+    # to us): the beacon speed and range rate are measured from
     range_rate: float = 0.0  # m/s, positive while we fly apart
     measured: bool = False  # range_rate comes from two beacons
 
@@ -103,20 +110,26 @@ class Peer:
     def heard(
         self, beacon: Beacon, now: float, own: tuple[int, int], *, max_speed: float = MAX_SPEED_M_S
     ) -> None:
-        """A new beacon: update the speed estimate (smoothed, capped: beacon positions are
-        coarse and a take-off jump is not a speed), the rate at which the distance to us
-        changes, and the position."""
-        dt = now - self.heard_at
+        """A new beacon: update the speed estimate (smoothed, capped: a take-off jump is not
+        a speed) and the rate at which the distance to us changes -- each over at least
+        ``RATE_SPAN_S``: two beacons a second apart (one sent at once after an edit) and a
+        position of ours a moment old would make a closing rate out of nothing -- and the
+        position."""
         gap = distance_m(own, (beacon.lat, beacon.lon))
-        if dt > 1.0:
-            speed = min(distance_m(self.position, (beacon.lat, beacon.lon)) / dt, max_speed)
+        if self.rate_from is None:  # our distance at its first beacon is not known
+            self.rate_from = (now, (beacon.lat, beacon.lon), gap)
+        then, where, before = self.rate_from
+        dt = now - then
+        if dt >= RATE_SPAN_S:
+            speed = min(distance_m(where, (beacon.lat, beacon.lon)) / dt, max_speed)
             self.speed_m_s = speed if self.speed_m_s == 0 else 0.5 * (self.speed_m_s + speed)
-            if self.gap_m is not None:
-                self.range_rate = (gap - self.gap_m) / dt
-                self.measured = True
-        self.beacon, self.heard_at, self.gap_m = beacon, now, gap
+            self.range_rate = (gap - before) / dt
+            self.measured = True
+            self.rate_from = (now, (beacon.lat, beacon.lon), gap)
+        self.beacon, self.heard_at = beacon, now
 
 
+RATE_SPAN_S = 4.0  # speeds and range rates are measured over at least this long
 SEPARATING_M_S = 2.0  # a range rate above this: the two fly apart
 MIN_CLOSING_M_S = 2.0  # a measured closing rate is taken as at least this
 FRESH_S = 15.0  # a range rate older than this is not trusted

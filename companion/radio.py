@@ -3,8 +3,13 @@
 A drone has one half-duplex radio.  Two runs at once (as Alice with one peer, as Bob for
 another) would only make each other's frames collide and time out, so runs take turns.  A
 waiting run goes by priority (lower first), then by arrival: answering a peer's near run,
-our own near runs, answering a full run, our own full runs -- what can be reached soon first,
-for every drone that waits on us.
+answering a full run, our own near runs, our own full runs.  Answers go first: the drone
+that asked waits with its own radio idle, and other drones may wait on it -- a chain of
+drones each waiting for the next is as slow as all its runs together.  For the same reason
+a request is refused ``BUSY`` at once (:meth:`companion.bob_answers.BobAnswers._admit`)
+rather than kept waiting when our own run on the air still waits for its peer's first reply
+(that peer may be busy itself), or when another answer already waits: a waiting request
+waits for one run under way at most.
 """
 
 from __future__ import annotations
@@ -14,7 +19,7 @@ import heapq
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
-ANSWER_NEAR, OWN_NEAR, ANSWER_FULL, OWN_FULL = 0, 1, 2, 3
+ANSWER_NEAR, ANSWER_FULL, OWN_NEAR, OWN_FULL = 0, 1, 2, 3
 
 
 class RadioTurns:

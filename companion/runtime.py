@@ -33,7 +33,7 @@ from . import logs
 from .alice_runs import AliceRuns
 from .beaconing import Beaconing
 from .bob_answers import BobAnswers
-from .core import CompanionSettings, Credentials
+from .core import TIMING_EVERY_S, CompanionSettings, Credentials
 from .events import EventKind
 from .flightpath import flight_path
 from .mission import MissionError
@@ -42,6 +42,7 @@ from .peers import distance_m
 __all__ = ["Companion", "CompanionSettings", "Credentials"]
 
 log = logging.getLogger("companion")
+EDIT_GRACE_S = 20.0  # an upload and its read-backs take seconds over a real link
 POSITION_RATE_HZ = 5.0  # telemetry position updates asked of the autopilot
 AUTOPILOT_SILENT_S = 5.0  # no position from the autopilot this long (real s): a warning
 
@@ -70,6 +71,8 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
         self._tasks = [
             asyncio.create_task(self._telemetry(), name="telemetry"),
             asyncio.create_task(self._progress(), name="progress"),
+            asyncio.create_task(self._armed(), name="armed"),
+            asyncio.create_task(self._flight_mode(), name="flight mode"),
             asyncio.create_task(self._autopilot_watch(), name="autopilot watch"),
             asyncio.create_task(self._certificates(), name="certificates"),
             asyncio.create_task(self._beacons(), name="beacons"),
@@ -77,11 +80,19 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
             asyncio.create_task(self._serve(), name="serve"),
             asyncio.create_task(self._alice_loop(), name="alice"),
             asyncio.create_task(self._guard(), name="guard"),
+            asyncio.create_task(self._timing_watch(), name="timing"),
         ]
         for task in self._tasks:
             task.add_done_callback(self._ended)
 
     async def stop(self) -> None:
+        """Cancel every task and close the radio and the store.  A mission edit under way is
+        let finish first (bounded): cut between upload and read-back it would leave the
+        vehicle holding a mission the companion never recorded."""
+        editing = False
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._edit_lock.acquire(), EDIT_GRACE_S)
+            editing = True
         for task in [*self._tasks, *self._children]:
             task.cancel()
         for task in [*self._tasks, *self._children]:
@@ -92,6 +103,8 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
                     log.warning("node %d: task %s did not stop", self.settings.node, task)
                 except Exception as exc:  # a task that failed has nothing left to stop
                     log.warning("node %d: task %s ended with %r", self.settings.node, task, exc)
+        if editing:
+            self._edit_lock.release()
         await self.endpoint.close()
         self.store.close()
 
@@ -99,7 +112,7 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
         telemetry = TelemetryAsync(self.autopilot.system)
-        last: tuple[float, tuple[int, int]] | None = None
+        last: tuple[float, tuple[int, int], float] | None = None
         try:
             # PX4 sends GLOBAL_POSITION_INT at 50 Hz on the onboard link (500 Hz in SITL at
             # 10x); a few per second is plenty here and keeps MAVSDK's callbacks keeping up
@@ -114,8 +127,10 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
                     round(p.longitude_deg * 1e7),
                     float(p.absolute_altitude_m),
                 )
+                self.position_at = self.clock.now()
                 was_on_ground = self.on_ground
                 self.relative_alt = float(p.relative_altitude_m)
+                self._note_position()
                 if was_on_ground and not self.on_ground:
                     self.has_flown = True
                     self._beacon_now.set()  # taking off: announce it
@@ -124,7 +139,33 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
                     if last is not None:
                         moved = distance_m(last[1], self.position[:2]) / (now - last[0])
                         self.speed_m_s = 0.5 * (self.speed_m_s + moved)
-                    last = (now, self.position[:2])
+                        self.climb_m_s = (self.relative_alt - last[2]) / (now - last[0])
+                    last = (now, self.position[:2], self.relative_alt)
+        finally:
+            telemetry.destroy()
+
+    async def _armed(self) -> None:
+        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+        telemetry = TelemetryAsync(self.autopilot.system)
+        try:
+            async for armed in telemetry.subscribe_armed():
+                if armed and not self.armed and self.relative_alt < 1.0:
+                    self.has_flown = True  # departing: its path is flown from here on
+                    self._beacon_now.set()  # taking off: announce it
+                self.armed = bool(armed)
+        finally:
+            telemetry.destroy()
+
+    async def _flight_mode(self) -> None:
+        """Is the vehicle holding in the air (PX4 AUTO.LOITER, ArduPilot LOITER: paused by
+        an operator or by us, or its mission over)?  Then when it flies on is unknown."""
+        from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
+
+        telemetry = TelemetryAsync(self.autopilot.system)
+        try:
+            async for mode in telemetry.subscribe_flight_mode():
+                self.held = mode == FlightMode.HOLD
         finally:
             telemetry.destroy()
 
@@ -148,6 +189,17 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
                 silent = False
                 log.info("node %d: the autopilot's position is back", self.settings.node)
 
+    async def _timing_watch(self) -> None:
+        """Every few seconds: is the vehicle still within its windows?  (:meth:`_keep_time`)"""
+        while True:
+            await self.clock.sleep(TIMING_EVERY_S)
+            self._keep_time()
+
     async def _progress(self) -> None:
         async for progress in self.autopilot.mission_raw.subscribe_mission_progress():
-            self.current_item = int(progress.current)
+            current, total = int(progress.current), int(progress.total)
+            self._progress_seen = (current, total, self.clock.now())
+            if total == len(self.mission) or not self._edit_lock.locked():
+                self.current_item = current
+            # (else an edit is being uploaded: the vehicle numbers the items of the new
+            # mission, and the companion holds the old one until the read-back is done)

@@ -109,10 +109,11 @@ class Circuit:
     def schedule(self) -> list[tuple[list[int], list[int]]]:
         """Per level L = 0 .. depth: (AND gates of level L, local gates of level L), each in
         wire order; level 0 has no ANDs."""
-        plan: list[tuple[list[int], list[int]]] = [([], []) for _ in range(self.depth + 1)]
+        depth = self.depth
+        plan: list[tuple[list[int], list[int]]] = [([], []) for _ in range(depth + 1)]
         for wire, gate in enumerate(self.gates):
             level = self.level[wire]
-            if level > self.depth or gate.op is Op.INPUT:
+            if level > depth or gate.op is Op.INPUT:
                 continue
             plan[level][0 if gate.op is Op.AND else 1].append(wire)
         return plan

@@ -27,6 +27,7 @@ from companion.beacon import (
     keys_hash,
     size_class,
 )
+from companion.levels import Slots
 from companion.neighbours import Heard, Neighbours
 from companion.state import StateStore
 from protocol.wire import Suite
@@ -34,9 +35,12 @@ from protocol.wire import Suite
 NOW = int(time.time())
 
 
-def beacon(t: int = NOW, counter: int = 0, levels: int = 0) -> Beacon:
+SLOTS = Slots(303, 0b110)  # 510-520 m AMSL
+
+
+def beacon(t: int = NOW, counter: int = 0, slots: Slots = SLOTS) -> Beacon:
     return Beacon(
-        473_977_420, 85_455_940, 518, False, frozenset({Suite.COMPACT}), 7, t, counter, levels, 3
+        473_977_420, 85_455_940, 518, False, frozenset({Suite.COMPACT}), 7, t, counter, slots, 3
     )
 
 
@@ -67,12 +71,12 @@ def pair(tmp_path: Path) -> tuple[Drone, Drone]:
 def test_formats_and_sizes(pair: tuple[Drone, Drone]) -> None:
     a, _ = pair
     signed = a.signed(beacon())
-    assert len(signed) == SIGNED_SIZE == 131 and BODY_SIZE == 19
+    assert len(signed) == SIGNED_SIZE == 136 and BODY_SIZE == 24
     decoded = decode_beacon(signed)
     assert isinstance(decoded, SignedBeacon) and decoded.beacon == beacon(t=NOW & 0xFFFF)
     assert decoded.signed_by(1, a.key.public) and not decoded.signed_by(2, a.key.public)
     tagged = beacon().tagged(1, [b"k" * 32, b"l" * 32])
-    assert len(tagged) == 19 + 2 * 4
+    assert len(tagged) == 24 + 2 * 4
     assert isinstance(decode_beacon(tagged), TaggedBeacon)
     assert len(a.cert_beacon()) == CERT_BEACON_SIZE == 117
     assert size_class(1) == 0 and size_class(4) == 2 and size_class(5) == 3

@@ -15,7 +15,7 @@ from companion.beacon import Beacon
 from companion.core import box_radius_m
 from companion.failsafe import FailsafeSettings, at_risk, run_seconds, too_late
 from companion.flightpath import flight_path
-from companion.levels import assign, levels_mask, plan_levels
+from companion.levels import NoClearAltitude, Slots, clear_raise, plan_raises
 from companion.link import PROFILES, Impairments
 from companion.link.airtime import DutyCycle
 from companion.link.clock import Clock, run_simulated
@@ -55,10 +55,10 @@ def north(metres: float) -> tuple[int, int]:
     return (LAT + round(metres / M_PER_E7_LAT), LON)
 
 
-def beacon(position: tuple[int, int], levels: int = 0) -> Beacon:
+def beacon(position: tuple[int, int], slots: Slots | None = None) -> Beacon:
     return Beacon(
         position[0], position[1], 518, False, frozenset({Suite.COMPACT}), 7, 1_800_000_000, 1,
-        levels,
+        slots or Slots.of([(517.0, 519.0)]),
     )  # fmt: skip
 
 
@@ -128,6 +128,22 @@ def test_precaution_covers_what_both_can_reach_before_the_result() -> None:
     assert at_risk(path, 0, here, 10.0, far, 10.0, 20.0, settings, peer_age_s=300.0) == [0, 1]
 
 
+def test_precaution_enters_our_segments_by_their_windows() -> None:
+    """With the schedule's windows (the earliest second we may enter each segment), those
+    decide which of our segments we reach before the result, not a floor speed: the route
+    and peer above, a result in 20 s (+10 s margin)."""
+    path = [north(0), north(300), north(600), north(900)]
+    peer = (north(600)[0], east(250)[1])
+    settings = FailsafeSettings(margin_s=10.0, reach_margin_m=0.0)
+    here = north(250)
+    # we enter segment 1 in 5 s and segment 2 in 25 s: both before 30 s, both reachable
+    assert at_risk(path, 0, here, 10.0, peer, 10.0, 20.0, settings, entered=[0, 5, 25]) == [1, 2]
+    # held up: segment 2 not before 40 s -- only segment 1
+    assert at_risk(path, 0, here, 10.0, peer, 10.0, 20.0, settings, entered=[0, 5, 40]) == [1]
+    # a long hold before segment 1: nothing at risk
+    assert at_risk(path, 0, here, 10.0, peer, 10.0, 20.0, settings, entered=[0, 50, 90]) == []
+
+
 def test_time_to_meet_worst_case_then_measured() -> None:
     peer = Peer(2, beacon(north(1000)), heard_at=0.0)
     assert time_to_meet(north(0), 0.0, peer, floor_m_s=5.0) == pytest.approx(100.0, rel=0.01)
@@ -158,27 +174,49 @@ def test_time_to_meet_worst_case_then_measured() -> None:
     assert time_to_meet(north(0), 10.0, peer, floor_m_s=5.0, now=500.0) == 0.0
 
 
-def test_levels_avoid_what_peers_announce() -> None:
-    assert assign({2: {1, 2}}, {}) == {1: 1, 2: 1}
-    assert assign({2: {1}, 3: {1}}, {2: 1 << 1}) == {1: 2}
-    assert assign({2: {1}, 3: {3}}, {2: 0b0110, 3: 1 << 1}) == {1: 3, 3: 2}
-    assert levels_mask({1: 1, 3: 2}) == 0b0110
+def test_slots_are_what_a_path_occupies() -> None:
+    """5 m slots of AMSL: a band touches every slot it reaches into; merged back into
+    intervals; the last of 32 slots stands for everything above."""
+    slots = Slots.of([(517.0, 519.0), (539.0, 541.0)])
+    assert slots.intervals() == [(515.0, 520.0), (535.0, 545.0)]
+    assert Slots.of([(500.0, 2000.0)]).intervals() == [(500.0, math.inf)]
+    assert Slots.of([]).intervals() == []
 
 
-def test_precautions_take_levels_like_conflicts() -> None:
-    # Peer 2 flies level 1 (for a third drone): a precaution for 2 goes one level higher,
-    # as a conflict with 2 would, and merges with the conflicts found.
-    assert plan_levels({}, {2: {1, 2}}, {2: 1 << 1}) == {1: 2, 2: 2}
-    assert plan_levels({3: {0}}, {2: {1}}, {2: 1 << 1}) == {0: 1, 1: 2}
-    assert plan_levels({2: {0}}, {2: {0, 1}}, {}) == {0: 1, 1: 1}
-    assert plan_levels({2: set()}, {}, {2: 0xFF}) == {}
+def test_a_raise_clears_the_peers_slots_by_the_vertical_separation() -> None:
+    """Same altitude (30 m over 488 m): 15 m up clears a 5 m slot by 10 m.  A peer 5 m
+    higher: 20 m.  A raise never lands within the separation of a slot (the band of the
+    drone 10 m higher is passed, not entered); between two slots of a peer it may stay."""
+    band = (517.0, 519.0)  # 30 m above home, +-1 m
+    same = Slots.of([(517.0, 519.0)])
+    higher = Slots.of([(522.0, 524.0)])
+    assert clear_raise(band, [same], 10.0, 10.0) == 15.0
+    assert clear_raise(band, [higher], 10.0, 10.0) == 20.0
+    assert clear_raise(band, [same, higher], 10.0, 10.0) == 20.0
+    assert clear_raise(band, [Slots.of([(517.0, 519.0), (600.0, 610.0)])], 10.0, 10.0) == 15.0
+    assert clear_raise(band, [Slots()], 10.0, 10.0) == 10.0  # nothing announced: the offset
+    with pytest.raises(NoClearAltitude):
+        clear_raise(band, [Slots.of([(500.0, 2000.0)])], 10.0, 10.0)
 
 
-def test_planner_levels() -> None:
+def test_precautions_take_raises_like_conflicts() -> None:
+    """Peer 2 flies 15 m up too (for a third drone): a precaution for 2 clears both of its
+    slots (530-535 m: 30 m up, 547 m), as a conflict with 2 would, and merges with the
+    conflicts found (peer 3 announces nothing: the offset)."""
+    bands = {k: (517.0, 519.0) for k in range(4)}
+    two = Slots.of([(517.0, 519.0), (532.0, 534.0)])
+    assert plan_raises({}, {2: {1, 2}}, {2: two}, bands, 10.0, 10.0) == {1: 30.0, 2: 30.0}
+    assert plan_raises({3: {0}}, {2: {1}}, {2: two}, bands, 10.0, 10.0) == {0: 10.0, 1: 30.0}
+    assert plan_raises({2: set()}, {}, {2: two}, bands, 10.0, 10.0) == {}
+
+
+def test_planner_raises() -> None:
+    """Raises in metres per segment; an item shared by two raised segments takes the
+    larger."""
     items = survey(6)
     path = flight_path(items, None)
-    one = plan_offsets(items, {1: 1}, path=path)
-    two = plan_offsets(items, {1: 2, 2: 1}, path=path)
+    one = plan_offsets(items, {1: 10.0}, path=path)
+    two = plan_offsets(items, {1: 20.0, 2: 10.0}, path=path)
     deltas_one = [b.z - a.z for a, b in zip(items, one, strict=True)]
     deltas_two = [b.z - a.z for a, b in zip(items, two, strict=True)]
     assert sorted(set(deltas_one)) == [0.0, 10.0]
@@ -239,7 +277,7 @@ def test_radio_turns_by_priority() -> None:
         assert not radio.taken
         return order
 
-    assert asyncio.run(main()) == [OWN_FULL, ANSWER_NEAR, OWN_NEAR, ANSWER_FULL, OWN_FULL]
+    assert asyncio.run(main()) == [OWN_FULL, ANSWER_NEAR, ANSWER_FULL, OWN_NEAR, OWN_FULL]
 
 
 def test_profiles() -> None:
@@ -280,7 +318,7 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
     (event,) = actions
     assert event.detail["waiting"] and event.detail["peer"] == 2
     assert 1 in event.detail["segments"]  # the leg over the crossing
-    assert companion.levels.get(1) == 1 and autopilot.uploads  # climbed, one level
+    assert companion.raises.get(1, 0) >= 10.0 and autopilot.uploads  # climbed clear of it
 
 
 def test_edit_is_built_on_the_held_mission_and_keeps_the_current_item() -> None:

@@ -10,7 +10,14 @@ from hypothesis import strategies as st
 
 from companion.flightpath import MOVABLE, flight_path
 from companion.mission import MissionError, MissionItem, normalise
-from companion.planner import OffsetSettings, PlannerError, fixed_segments, plan_offsets
+from companion.planner import (
+    OffsetSettings,
+    PlannerError,
+    Vehicle,
+    fixed_segments,
+    plan_edit,
+    plan_offsets,
+)
 
 from .missions import HOME, item
 
@@ -97,3 +104,57 @@ def test_normalise_and_checks() -> None:
         normalise([item(0).replace(frame=99)])
     with pytest.raises(MissionError, match="not a number"):
         normalise([item(0, 16, 47.0, 8.0).replace(z=math.inf)])
+
+
+EAST = 0.004  # degrees of longitude: about 300 m at HOME's latitude
+
+
+def route() -> list[MissionItem]:
+    """Take-off to 30 m, three waypoints 300 m apart going east, a DO_JUMP back to the
+    second waypoint once, a landing."""
+    lat, lon = HOME[0], HOME[1]
+    items = [item(0, 22, lat, lon, 30.0)]
+    items += [item(i, 16, lat, lon + i * EAST, 30.0) for i in (1, 2, 3)]
+    jump = item(4, 177, frame=2).replace(param1=2.0, param2=1.0)
+    return [*items, jump, item(5, 21, lat, lon + 3 * EAST, 0.0)]
+
+
+def test_edit_on_the_ground_raises_the_take_off() -> None:
+    """Before take-off the first leg starts at the take-off's altitude: a raise of the leg
+    from the take-off point lifts the take-off item too (the whole leg at the raise)."""
+    items = route()
+    path = flight_path(items, HOME_E7)
+    first = next(k for k in range(path.segments) if 0 in path.vertices[k].items)
+    ground = Vehicle(None, *HOME_E7, 0.0, HOME[2])
+    edit = plan_edit(items, {first: 15.0}, OffsetSettings(), path=path, vehicle=ground)
+    assert edit.inserted is None and edit.origin == tuple(range(len(items)))
+    assert edit.items[0].z == 45.0  # the take-off
+    ends = {i for v in (path.vertices[first], path.vertices[first + 1]) for i in v.items}
+    assert all(edit.items[i].z == items[i].z + 15.0 for i in ends if items[i].command == 16)
+
+
+def test_edit_in_flight_inserts_a_waypoint_ahead_on_the_raised_leg() -> None:
+    """In flight on the raised leg, below its new altitude: a waypoint at the raised
+    altitude is inserted ahead (by the lead the climb needs), the vehicle's leg is split
+    there, every later item moves on by one and the DO_JUMP follows its target."""
+    items = route()
+    path = flight_path(items, HOME_E7)
+    k = path.start_at(2)  # flying to waypoint 2
+    here = (HOME_E7[0], HOME_E7[1] + round(1.2 * EAST * 1e7))
+    vehicle = Vehicle(k, *here, 30.0, HOME[2] + 30.0, lead_per_m=3.0)
+    edit = plan_edit(items, {k: 10.0}, OffsetSettings(), path=path, vehicle=vehicle)
+    assert edit.inserted == 2
+    new = edit.items[2]
+    assert new.command == 16 and new.z == 40.0
+    assert HOME_E7[1] < here[1] < new.y < items[2].y  # between the vehicle and the target
+    assert new.y - here[1] == pytest.approx(30.0 / 300.0 * EAST * 1e7, rel=0.05)  # 3 m/m x 10
+    assert edit.origin == (0, 1, 2, 2, 3, 4, 5)
+    assert [it.seq for it in edit.items] == list(range(len(items) + 1))
+    assert edit.items[5].command == 177 and edit.items[5].param1 == 3.0  # the jump follows
+    assert edit.index_of(2) == 3 and edit.index_of(5) == 6
+    # already at the raised altitude: nothing inserted
+    high = Vehicle(k, *here, 40.0, HOME[2] + 40.0, lead_per_m=3.0)
+    assert plan_edit(items, {k: 10.0}, OffsetSettings(), path=path, vehicle=high).inserted is None
+    # a raise of another segment: nothing inserted either
+    other = plan_edit(items, {k + 1: 10.0}, OffsetSettings(), path=path, vehicle=vehicle)
+    assert other.inserted is None

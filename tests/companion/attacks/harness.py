@@ -18,6 +18,7 @@ from companion.beacon import Beacon, CertBeacon
 from companion.beacon import keys_hash as beacon_keys_hash
 from companion.exchange import RunReport, run_alice
 from companion.flightpath import flight_path
+from companion.levels import Slots
 from companion.link import PROFILES, Channel, Clock, Impairments, LinkEndpoint, SimMedium
 from companion.link.frames import OVERHEAD, AbortCode, Flag, Frame, FrameType, decode_frame
 from companion.mission import MissionItem
@@ -235,7 +236,7 @@ class Rogue:
         self.counter += 1
         beacon = Beacon(
             position[0], position[1], 500, False, frozenset({Suite.COMPACT}), 1,
-            int(w.clock.wall()), self.counter, 0, size_class,
+            int(w.clock.wall()), self.counter, Slots(), size_class,
         )  # fmt: skip
         keys = beacon_keys_hash(b"r" * 16, self.keys.public, b"")
         await self.endpoint.beacon(beacon.signed(self.node, identity.key, self.keys.public, keys))

@@ -10,6 +10,7 @@ from typing import Any
 import pytest
 
 from companion.auth.session import Refusal
+from companion.core import CompanionSettings
 from companion.exchange import PeerRefused
 from companion.link import run_simulated
 from protocol.grid import GridSpec
@@ -109,7 +110,10 @@ def test_an_honest_box_beyond_the_peers_limit_is_refused_and_said_so(tmp_path: P
 
     w = run_simulated(main())
     failed = [e for e in w.events(1, "run_failed") if e.get("refused") == "BOX"]
-    assert failed and all(e["box_radius_m"] >= 500 and e["resolution_mm"] == 500 for e in failed)
+    resolution = CompanionSettings(node=1, autopilot_url="").grid_resolution_mm
+    assert failed and all(
+        e["box_radius_m"] >= 500 and e["resolution_mm"] == resolution for e in failed
+    )
     assert not w.events(1, "result") and not w.autopilots[1].uploads
     assert "BOX" in {e["reason"] for e in w.events(2, "refused")}
     assert not w.events(2, "answered")

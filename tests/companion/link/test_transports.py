@@ -152,11 +152,14 @@ async def test_serial_line_noise_is_dropped() -> None:
     radio = SerialTransport.open(dev)
     got: list[bytes] = []
     radio.set_receiver(got.append)
-    os.write(
-        master,
-        b"\x00\x03ab\x00" + b"\x00\x05\x01\x00" + os.urandom(600).replace(b"\x00", b"") + b"\x00",
-    )
-    await asyncio.sleep(0.05)
+    # 600 bytes of noise without a delimiter, made so that no suffix of it is a valid COBS
+    # block (random bytes are one about every 130 draws: a chunk the UART cut anywhere must
+    # not decode by chance)
+    noise = b"\x01" * 345 + b"\xfe" + b"\xff" * 254
+    os.write(master, b"\x00\x03ab\x00" + b"\x00\x05\x01\x00" + noise + b"\x00")
+    async with asyncio.timeout(10):  # the pty hands the bytes on when it gets to it
+        while radio.dropped < 2:  # the malformed block, then the noise
+            await asyncio.sleep(0.01)
     await radio.close()
     os.close(master)
     assert got == [b"ab"]
