@@ -63,11 +63,12 @@ if __name__ == "__main__":
     # Head-on along one line from 1.8 km apart: they meet after about 95 s.
     route("inflight_headon_east", 90.0, [-900, -300, 300, 900])
     route("inflight_headon_west", 270.0, [-900, -500, 100, 900])
-    # Three drones through one point, 2 km out (three first contacts share one channel).
-    # (1.5 km out was marginal: one replay in a loaded make test needed a precaution.)
-    route("inflight_star_east", 90.0, [-2000, -500, 500, 2000])
-    route("inflight_star_north", 0.0, [-2000, -600, 400, 2000])
-    route("inflight_star_northeast", 45.0, [-2000, -400, 600, 2000])
+    # Three drones through one point, 3 km out (three first contacts share one channel).
+    # (1.5 km out was marginal with the crossing-only runs; 2 km with protected-volume runs,
+    # about 2.2 times their bytes: one replay in two needed a precaution, at 2.5 km one in three.)
+    route("inflight_star_east", 90.0, [-3000, -500, 500, 2000])
+    route("inflight_star_north", 0.0, [-3000, -600, 400, 2000])
+    route("inflight_star_northeast", 45.0, [-3000, -400, 600, 2000])
     # A long survey-like route (nine 200 m legs) crossed 1.1 km out: an m x n run of 16 x 4.
     # (900 m out, a meeting after ~100 s, was marginal: one run in ~8 needed a precaution.)
     route("inflight_long_east", 90.0, [-1100, -900, -700, -500, -300, -100, 100, 300, 500, 700])

@@ -1,11 +1,13 @@
 """Re-run the benchmarks and rewrite their sections of docs/benchmarks.md.
 
 Usage: .venv/bin/python scripts/record_benchmarks.py [crypto] [paper] [paper-dgk] [scaling]
-[scaling-2000] [design] [link] [replays] [replays-px4] [demo] (default: all; replays-px4 only
+[scaling-2000] [paper-separation] [scaling-separation] [design] [link] [replays] [replays-px4]
+[demo] (default: all; replays-px4 only
 with PX4_SITL set to a PX4 SITL build) [--repeat N] [--data DIR]
 
-``paper``, ``paper-dgk`` and ``link`` run the paper's benchmark files, read from ``--data DIR``
-(default: ``../shared/anchor-data`` beside the repository); the project does not carry them.
+``paper``, ``paper-dgk``, ``paper-separation`` and ``link`` run the paper's benchmark files,
+read from ``--data DIR`` (default: ``../shared/anchor-data`` beside the repository); the
+project does not carry them.
 
 Each section sits between markers ``<!-- bench NAME -->`` and ``<!-- /bench NAME -->``; the
 rest of the file is kept.  ``demo`` is README.md's: the summary ``make demo`` prints, so the
@@ -34,6 +36,7 @@ from protocol.tools.bench_paths import (
     format_paper,
     format_scaling,
 )
+from protocol.volumes import Separation
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "benchmarks.md"
@@ -122,6 +125,13 @@ def sections(repeat: int, data: Path) -> dict[str, Callable[[], str]]:
         "paper-dgk": lambda: format_paper(bench_paper(data, suite="paper")),
         "scaling": lambda: format_scaling(bench_scaling()),
         "scaling-2000": lambda: format_scaling(bench_scaling((8, 16), range_=2000)),
+        # protected volumes (issue 26's targets): a separation of 30 grid units
+        "paper-separation": lambda: format_paper(
+            bench_paper(data, suite="compact", separation=Separation(30))
+        ),
+        "scaling-separation": lambda: format_scaling(
+            bench_scaling((1, 2, 4, 8), range_=2000, separation=Separation(30))
+        ),
         "design": lambda: format_design(bench_design()),
         "link": lambda: format_link(bench_link(data)),
         "replays": replays,

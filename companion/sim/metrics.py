@@ -1,7 +1,16 @@
 """What a replay measured: each drone's runs, edits and radio costs from its companion's
-events, each pair's closest approach with the companions and without them (the baseline),
-and whether a conflict was resolved by the companions' action -- made into the typed
+events, each pair's separation with the companions and without them (the baseline), and
+whether a conflict was resolved by the companions' action -- made into the typed
 :class:`~companion.sim.report.ReplayReport`.
+
+A pair is in *conflict* when, without the companions, the two drones came inside each other's
+protected volume: horizontally closer than ``separation_m`` and vertically closer than
+``vertical_separation_m`` at the same moment (whether their tracks cross or not).  It is
+*resolved* when a companion acted for it (a precaution, or a verified edit flying higher a
+segment a run flagged for that peer) before they would have met, and with the companions they
+never came inside (vertically: less the vehicles' altitude accuracy).  An edit or precaution
+for a pair that never came inside without the companions is a *false alarm*; a pair the
+companions brought closer, and inside, is *made worse*.
 """
 
 from __future__ import annotations
@@ -11,6 +20,7 @@ import math
 from protocol.geodesy import ground_offset
 from protocol.geometry import path_hits
 from protocol.grid import GridSpec
+from protocol.volumes import Route, Separation, route_hits
 
 from ..autopilots import personality
 from ..beacon import UNAUTHENTICATED_SIZE
@@ -35,13 +45,44 @@ TIMELINE = frozenset(
         K.RUN_STARTED,
         K.RESULT,
         K.RUN_FAILED,
+        K.PEER_BUSY,
         K.UPLOADED,
         K.PRECAUTIONARY,
         K.HOLD,
         K.RESUMED,
+        K.RETIMED,
         K.SETUP_RENEWED,
     }
 )
+
+
+def _aligned(a: Track, b: Track) -> list[tuple[float, float, float, float]]:
+    """(t, dt, horizontal m, vertical m) at each sample of ``a``, against ``b`` at the
+    nearest time (both tracks are sampled finely in simulated time)."""
+    out: list[tuple[float, float, float, float]] = []
+    if not a or not b:
+        return out
+    j = 0
+    previous = a[0][0]
+    for t, lat, lon, alt in a:
+        while j + 1 < len(b) and abs(b[j + 1][0] - t) <= abs(b[j][0] - t):
+            j += 1
+        north, east = ground_offset(lat, lon, b[j][1], b[j][2])
+        out.append((t, t - previous, math.hypot(north, east), abs(alt - b[j][3])))
+        previous = t
+    return out
+
+
+def intrusion(a: Track, b: Track, horizontal_m: float, vertical_m: float) -> tuple[float, float]:
+    """Seconds the two were inside each other's protected volume (horizontally closer than
+    ``horizontal_m`` and vertically than ``vertical_m``), and when they first were (inf:
+    never)."""
+    inside, first = 0.0, math.inf
+    for t, dt, h, v in _aligned(a, b):
+        if h < horizontal_m and v < vertical_m:
+            inside += dt
+            first = min(first, t)
+    return inside, first
 
 
 def closest(
@@ -84,7 +125,7 @@ def _acted(c: Companion, peer: int, until: float) -> bool:
         e.kind is K.UPLOADED
         and e.t <= until
         and e.detail.get("verified")
-        and flagged & {int(k) for k in e.detail.get("levels", {})}
+        and flagged & {int(k) for k in e.detail.get("raises", {})}
         for e in c.events
     )
 
@@ -104,21 +145,21 @@ def build_report(
         round(first.home[0] * 1e7), round(first.home[1] * 1e7), radius_m=REPORT_RADIUS_M
     )
     paths = {  # a hover is a point, as Bob sends it
-        d.id: point_as_segment(grid.project_path(d.path.points, checked=False))
+        d.id: tuple(point_as_segment(grid.project_path(d.path.points, checked=False)))
         for d in scenario.drones
     }
     drones: list[DroneReport] = []
-    false_alarms, precautions = 0, 0
+    precautions = 0
     specs = {d.id: d for d in scenario.drones}
+    capsule = Separation(math.ceil(scenario.separation_m * 1000 / grid.resolution_mm))
     for d in scenario.drones:
         c = companions[d.id]
         others = [
             p for k, p in paths.items() if k != d.id and scenario.trusted_pair(d, specs[k])
         ]  # (a drone nobody deconflicts with has nothing to flag)
-        hits = [path_hits(paths[d.id], o) for o in others]
+        hits = [route_hits(Route(paths[d.id]), Route(o), capsule) for o in others]
         plain = [any(h) for h in zip(*hits, strict=True)] if hits else [False] * d.path.segments
         flagged = sorted(c.flagged)
-        false_alarms += sum(1 for k in flagged if k < len(plain) and not plain[k])
         precautionary = [
             {"t_s": round(e.t, 1), **e.detail} for e in c.events if e.kind is K.PRECAUTIONARY
         ]
@@ -137,7 +178,7 @@ def build_report(
                 segments=d.path.segments,
                 conflicting_segments=[k for k, h in enumerate(plain) if h],
                 flagged_segments=flagged,
-                levels={str(k): v for k, v in sorted(c.levels.items())},
+                raises={str(k): v for k, v in sorted(c.raises.items())},
                 edits=[e.detail for e in c.events if e.kind is K.UPLOADED],
                 edit=_edit_status(c),
                 runs_unfinished=_unfinished(c),
@@ -171,35 +212,51 @@ def build_report(
             )
         )
     pairs: list[PairReport] = []
-    resolved, conflicts, untrusted = 0, 0, 0
+    resolved, conflicts, untrusted, false_alarms, worse = 0, 0, 0, 0, 0
     ids = [d.id for d in scenario.drones]
+    r, v = scenario.separation_m, scenario.vertical_separation_m
     for i, a in enumerate(ids):
         for b in ids[i + 1 :]:
             crossing = any(path_hits(paths[a], paths[b]))
+            near = any(route_hits(Route(paths[a]), Route(paths[b]), capsule))
             with_companion, when, _, _ = closest(mocks[a].trajectory, mocks[b].trajectory)
             without, _, _, _ = closest(baseline[a], baseline[b])
             trusted = scenario.trusted_pair(specs[a], specs[b])
-            conflict = crossing and without < scenario.offset_m
             # each vehicle holds its altitude to within its own accuracy
             tolerance = mocks[a].altitude_accuracy_m + mocks[b].altitude_accuracy_m
+            inside_before, met = intrusion(baseline[a], baseline[b], r, v)
+            inside_after, _ = intrusion(mocks[a].trajectory, mocks[b].trajectory, r, v - tolerance)
+            conflict = inside_before > 0
             # a pair with an operator outside the trust store is deliberately not deconflicted
-            acted = trusted and (_acted(companions[a], b, when) or _acted(companions[b], a, when))
-            ok = conflict and acted and (with_companion >= scenario.offset_m - tolerance)
+            acted = trusted and (_acted(companions[a], b, met) or _acted(companions[b], a, met))
+            ever = trusted and (
+                _acted(companions[a], b, math.inf) or _acted(companions[b], a, math.inf)
+            )
+            ok = conflict and acted and inside_after == 0
+            made_worse = with_companion < without - tolerance and inside_after > 0
+            false_alarm = ever and not conflict
             untrusted += conflict and not trusted
             conflicts += conflict and trusted
             resolved += ok
+            false_alarms += false_alarm
+            worse += made_worse
             pairs.append(
                 PairReport(
                     drones=(a, b),
                     trusted=trusted,
                     paths_cross=crossing,
+                    paths_near=near,
                     conflict=conflict,
                     acted=acted,
                     resolved=ok,
+                    made_worse=made_worse,
+                    false_alarm=false_alarm,
                     closest_approach_m=round(with_companion, 2),
                     closest_approach_t_s=round(when, 1),
                     closest_approach_baseline_m=round(without, 2),
                     resolved_tolerance_m=tolerance,
+                    inside_s=round(inside_after, 1),
+                    inside_baseline_s=round(inside_before, 1),
                 )
             )
     return ReplayReport(
@@ -215,6 +272,9 @@ def build_report(
         untrusted_conflicts=untrusted,
         precautionary_actions=precautions,
         false_alarms=false_alarms,
+        made_worse=worse,
+        separation_m=r,
+        vertical_separation_m=v,
     ).judged()
 
 

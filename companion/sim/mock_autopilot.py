@@ -152,17 +152,23 @@ class MockAutopilot(MockFlight):
         self._send(message, link, reply=True)
 
     def _heartbeat(self) -> None:
-        self._send(wire.heartbeat(self.mav, self.ardupilot, self.armed, self.mission_running))
+        in_air = self.flying and not self.mission_running  # paused, or the mission is over
+        self._send(
+            wire.heartbeat(self.mav, self.ardupilot, self.armed, self.mission_running, in_air)
+        )
 
     def _report_current(self) -> None:
         self._send(self.mav.mission_current_encode(self.current, len(self.mission), 0, 0))
 
     async def _heartbeats(self) -> None:
+        """HEARTBEAT, MISSION_CURRENT and HOME_POSITION once a simulated second, as PX4 SITL
+        sends them in its lock-step time (at most 50 a real second)."""
+        period = 1.0 / min(max(self.flight.time_scale, 1.0), 50.0)
         while True:
             self._heartbeat()
             self._report_current()
             self._send(wire.home_position(self.mav, self.home))
-            await asyncio.sleep(1.0)
+            await asyncio.sleep(period)
 
     # ------------------------------------------------------------------ receiving
 

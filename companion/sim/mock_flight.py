@@ -183,6 +183,16 @@ class MockFlight(MissionServer):
         """Armed, flying the mission from the current item (what arm + MISSION_START do)."""
         self._start_mission()
 
+    def pause(self) -> None:
+        """Hold where it is, as the operator's hold switch (AUTO.LOITER) does in flight."""
+        if self.flying:
+            self._hold()
+
+    def resume(self) -> None:
+        """Fly the mission on from the current item (AUTO.MISSION again)."""
+        if self.armed and self.mission and self._startable():
+            self._start_mission()
+
     def _start_mission(self) -> None:
         self.craft.items = self.mission
         self.craft.start()

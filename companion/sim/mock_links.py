@@ -108,13 +108,22 @@ class Link(asyncio.DatagramProtocol):
             self._transport.sendto(data, self.partner)
 
 
-def heartbeat(mav: Any, ardupilot: bool, armed: bool, in_mission: bool) -> Any:
-    """HEARTBEAT of a quadrotor: PX4 custom mode AUTO.MISSION while flying the mission."""
+def heartbeat(
+    mav: Any, ardupilot: bool, armed: bool, in_mission: bool, holding: bool = False
+) -> Any:
+    """HEARTBEAT of a quadrotor in its custom mode: flying the mission, PX4's AUTO.MISSION
+    (main 4, sub 4) or ArduPilot Copter's AUTO (3); holding in the air (paused, or the
+    mission over), AUTO.LOITER (4, 3) or LOITER (5); else PX4 0, ArduPilot STABILIZE (0)."""
     autopilot = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA if ardupilot else mavlink.MAV_AUTOPILOT_PX4
     base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     if armed:
         base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-    custom = (4 << 16) | (4 << 24) if in_mission and not ardupilot else 0
+    if in_mission:
+        custom = 3 if ardupilot else (4 << 16) | (4 << 24)
+    elif holding:
+        custom = 5 if ardupilot else (4 << 16) | (3 << 24)
+    else:
+        custom = 0
     state = mavlink.MAV_STATE_ACTIVE if armed else mavlink.MAV_STATE_STANDBY
     return mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, autopilot, base, custom, state, 3)
 

@@ -30,6 +30,7 @@ from ..failsafe import FailsafeSettings
 from ..link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
 from ..planner import OffsetSettings
 from ..runtime import Companion, CompanionSettings
+from ..schedule import SeparationSettings
 from ..tasks import spawn
 from .fleet import make_fleet
 from .metrics import build_report
@@ -73,6 +74,7 @@ TOLD = frozenset(
         EventKind.TASK_FAILED,
         EventKind.PLAN_FAILED,
         EventKind.UPLOAD_FAILED,
+        EventKind.RETIMED,
     }
 )
 
@@ -88,11 +90,18 @@ def _story(event: Event) -> str:
     if event.kind is EventKind.RESULT:
         flagged = ", ".join(map(str, d["flagged"])) or "none"
         return (
-            f"result of the {d['phase']} run with {d['peer']}: segments {flagged} cross "
+            f"result of the {d['phase']} run with {d['peer']}: segments {flagged} conflict "
             f"({d['bytes']} B sent, {d['run_s']:.0f} s)"
         )
     if event.kind is EventKind.UPLOADED:
         return "edit uploaded and verified"
+    if event.kind is EventKind.RETIMED:
+        if d["held"]:
+            return "holding: its windows are open from now on, every peer compares again"
+        if d.get("on_ground"):
+            return "still on the ground after half its wait: every peer compares again"
+        way = "behind" if d["drift_s"] > 0 else "ahead of"
+        return f"{abs(d['drift_s']):.0f} s {way} its windows: every peer compares again"
     details = ", ".join(f"{k}={v}" for k, v in d.items())
     return f"{event.kind.replace('_', ' ')} ({details})"
 
@@ -104,7 +113,8 @@ def free_udp_port() -> int:
 
 
 def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float, float]]]:
-    """The baseline: the same missions and schedule through the same flight model, no radio."""
+    """The baseline: the same missions and schedule -- take-offs and scripted holds -- through
+    the same flight model, no radio."""
     rate = 10.0
     mocks = {
         d.id: MockAutopilot(
@@ -124,9 +134,17 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
             if d.id not in started and t >= d.takeoff_delay_s:
                 mock.take_off()
                 started.add(d.id)
+            if d.pause is not None and d.id in started:
+                at, length = d.pause
+                if at <= t < at + dt:
+                    mock.pause()
+                elif at + length <= t < at + length + dt:
+                    mock.resume()
             mock.advance(dt)
         t += dt
-        if len(started) == len(mocks) and not any(m.mission_running for m in mocks.values()):
+        if len(started) == len(mocks) and not any(
+            m.mission_running or m.holding for m in mocks.values()
+        ):
             break
     return {k: m.trajectory for k, m in mocks.items()}
 
@@ -206,6 +224,9 @@ async def run_replay(
                 lookahead_s=scenario.lookahead_s,
                 cruise_m_s=scenario.cruise_m_s,
                 failsafe=FailsafeSettings(action=scenario.failsafe),
+                separation=SeparationSettings(
+                    scenario.separation_m, scenario.vertical_separation_m
+                ),
             )
             endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
             companions[d.id] = Companion(settings, endpoint, ap, fleet[d.id])
@@ -220,6 +241,7 @@ async def run_replay(
         for companion in companions.values():
             companion.epoch = clock.now()
         started: set[int] = set()
+        paused: dict[int, bool] = {}  # held by the scenario (False), and flying on (True)
         told = {d.id: 0 for d in scenario.drones}  # companion events already told
         while True:
             sim = clock.now() - origin
@@ -238,6 +260,16 @@ async def run_replay(
                 waiting = (
                     d.hold_for_comparisons and d.id in companions and companions[d.id].comparing
                 )
+                if d.pause is not None and d.id in started and d.id not in paused:
+                    if sim >= d.pause[0]:
+                        await mocks[d.id].pause()
+                        paused[d.id] = False
+                        say(f"t={sim:.0f} s: drone {d.id} is held for {d.pause[1]:.0f} s")
+                elif d.pause is not None and paused.get(d.id) is False:
+                    if sim >= d.pause[0] + d.pause[1]:
+                        await mocks[d.id].resume()
+                        paused[d.id] = True
+                        say(f"t={sim:.0f} s: drone {d.id} flies on")
                 if d.id not in started and sim >= d.takeoff_delay_s and not waiting:
                     # a drone about to take off waits for its comparison to finish
                     await mocks[d.id].take_off()

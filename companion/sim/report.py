@@ -54,7 +54,7 @@ class DroneReport:
     segments: int
     conflicting_segments: list[int]  # the plain predicate against every trusted peer
     flagged_segments: list[int]  # what the companion's runs flagged
-    levels: dict[str, int]  # segment -> altitude level, as uploaded
+    raises: dict[str, float]  # segment -> metres higher, as uploaded
     edits: list[Detail]
     edit: EditStatus
     runs_unfinished: int  # runs as Alice cut off by the end
@@ -77,14 +77,19 @@ class DroneReport:
 class PairReport:
     drones: tuple[int, int]
     trusted: bool
-    paths_cross: bool
-    conflict: bool  # paths cross and, without the companion, they came closer than the offset
-    acted: bool  # a precaution or a verified edit for the pair before the closest approach
-    resolved: bool
+    paths_cross: bool  # the ground tracks cross (the paper's predicate)
+    paths_near: bool  # the ground tracks come within the horizontal separation
+    conflict: bool  # without the companion they came inside each other's protected volume
+    acted: bool  # a precaution or a verified edit for the pair (before the first intrusion)
+    resolved: bool  # a conflict, acted upon, and never inside with the companion
+    made_worse: bool  # the companion brought them closer, and inside the protected volume
+    false_alarm: bool  # an edit or precaution for the pair, which never came inside without
     closest_approach_m: float
     closest_approach_t_s: float
     closest_approach_baseline_m: float
     resolved_tolerance_m: float
+    inside_s: float = 0.0  # seconds inside the protected volume with the companion
+    inside_baseline_s: float = 0.0  # and without
 
 
 @dataclass(frozen=True)
@@ -107,7 +112,10 @@ class ReplayReport:
     conflicts_resolved: int
     untrusted_conflicts: int  # with drones outside the trust stores: not handled
     precautionary_actions: int
-    false_alarms: int
+    false_alarms: int  # pairs with an edit or a precaution that never came inside without
+    made_worse: int = 0  # pairs the companion brought closer, inside the protected volume
+    separation_m: float = 15.0  # the protected volume: horizontally
+    vertical_separation_m: float = 10.0  # and vertically
     problems: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
@@ -161,22 +169,32 @@ def problems(report: ReplayReport) -> list[str]:
             if failure["kind"] in FAILURES:
                 why = failure.get("error") or failure.get("why") or ""
                 out.append(f"drone {d.id}: {failure['kind'].replace('_', ' ')}: {why}")
+    volume = f"{report.separation_m:g} m / {report.vertical_separation_m:g} m"
     for p in report.pairs:
+        a, b = p.drones
         if p.conflict and p.trusted and not p.resolved:
-            a, b = p.drones
             out.append(
-                f"drones {a}-{b}: conflict NOT resolved (closest approach "
-                f"{p.closest_approach_m:.1f} m, offset {report.offset_m:g} m)"
+                f"drones {a}-{b}: conflict NOT resolved ({p.inside_s:.0f} s inside the "
+                f"protected volume, {volume}; closest approach {p.closest_approach_m:.1f} m)"
             )
-    if report.false_alarms:
-        out.append(f"{report.false_alarms} segment(s) flagged that do not cross (false alarm)")
+        if p.made_worse:
+            out.append(
+                f"drones {a}-{b}: made WORSE by the companion (closest approach "
+                f"{p.closest_approach_baseline_m:.1f} m without it, {p.closest_approach_m:.1f} m "
+                f"with it, inside the protected volume {volume})"
+            )
+        if p.false_alarm:
+            out.append(
+                f"drones {a}-{b}: false alarm (an edit or precaution, but never inside the "
+                f"protected volume {volume} without the companion)"
+            )
     return out
 
 
 def _drone_line(d: DroneReport, offset_m: float) -> str:
     if d.edit is EditStatus.VERIFIED:
-        levels = ", ".join(f"{k} (+{v * offset_m:.0f} m)" for k, v in d.levels.items())
-        what = f"flies segments {levels or 'none'} higher (upload verified)"
+        raises = ", ".join(f"{k} ({v:+.0f} m)" for k, v in d.raises.items())
+        what = f"flies segments {raises or 'none'} higher (upload verified)"
     elif d.edit is EditStatus.FAILED:
         what = "needed an edit that FAILED, flies its original altitudes"
     else:
@@ -207,6 +225,10 @@ def _pair_line(p: PairReport) -> str:
             f"closest approach {p.closest_approach_m:.1f} m"
         )
     verdict = "resolved" if p.resolved else "NOT resolved" if p.conflict else "no conflict"
+    if p.made_worse:
+        verdict += ", made WORSE"
+    if p.false_alarm:
+        verdict += ", a false alarm"
     return (
         f"  drones {a}-{b}: closest approach {p.closest_approach_baseline_m:.1f} m "
         f"without the companion, {p.closest_approach_m:.1f} m with it "
@@ -227,7 +249,7 @@ def format_report(report: ReplayReport) -> str:
     lines.append(
         f"  conflicts resolved {report.conflicts_resolved}/{report.conflicts}, "
         f"precautionary actions {report.precautionary_actions}, "
-        f"false alarms {report.false_alarms}"
+        f"false alarms {report.false_alarms}, made worse {report.made_worse}"
         + (
             f"; {report.untrusted_conflicts} conflict(s) with untrusted drones NOT handled"
             if report.untrusted_conflicts

@@ -17,6 +17,8 @@ A scenario::
     takeoff_delay_s = 0      # optional
     autopilot = "px4"        # or "ardupilot"
     hold_for_comparisons = true  # optional: take-off waits for a comparison under way
+    pause_at_s = 120         # optional: held in flight at this time (an operator's hold,
+    pause_for_s = 240        # a head wind): a delay the companion did not foresee
     operator = "fleet"       # optional: whose certificate it flies with
 """
 
@@ -54,6 +56,7 @@ class DroneSpec:
     companion_stop_in_run: bool = False  # ... or later, once it has a run on the air
     hold_for_comparisons: bool = True  # on the ground, take-off waits for a running run
     operator: str = "fleet"  # whose certificate it flies with
+    pause: tuple[float, float] | None = None  # held in flight (at, for how long), simulated
 
     @property
     def path(self) -> FlightPath:
@@ -72,10 +75,12 @@ class Scenario:
     seed: int | None
     drones: list[DroneSpec]
     offset_m: float = 10.0
+    separation_m: float = 15.0
+    vertical_separation_m: float = 10.0
     cruise_m_s: float = 10.0
     beacon_interval_s: float = 5.0
     grid_radius_m: float = 500.0
-    grid_resolution_mm: int = 500
+    grid_resolution_mm: int = 2000
     lookahead_s: float = 60.0
     failsafe: Action = Action.CLIMB
     untrusted_operators: frozenset[str] = frozenset()  # not in the other drones' trust stores
@@ -137,6 +142,7 @@ def load_scenario(path: str | Path) -> Scenario:
                 kind == "ardupilot",
                 hold_for_comparisons=raw.flag("hold_for_comparisons", True),
                 operator=raw.text("operator", "fleet"),
+                pause=_pause(raw),
             )
         )
     failsafe = doc.text("failsafe", "climb", [a.value for a in Action])
@@ -153,10 +159,12 @@ def load_scenario(path: str | Path) -> Scenario:
         seed=seed,
         drones=drones,
         offset_m=doc.number("offset_m", 10.0, low=0.0, above=True),
+        separation_m=doc.number("separation_m", 15.0, low=0.0),
+        vertical_separation_m=doc.number("vertical_separation_m", 10.0, low=0.0),
         cruise_m_s=doc.number("cruise_m_s", 10.0, low=0.0, above=True),
         beacon_interval_s=doc.number("beacon_interval_s", 5.0, low=0.0, above=True),
         grid_radius_m=doc.number("grid_radius_m", 500.0, low=0.0, above=True),
-        grid_resolution_mm=doc.integer("grid_resolution_mm", 500, low=1),
+        grid_resolution_mm=doc.integer("grid_resolution_mm", 2000, low=1),
         lookahead_s=doc.number("lookahead_s", 60.0, low=0.0),
         failsafe=Action(failsafe),
         untrusted_operators=frozenset(untrusted),
@@ -164,3 +172,13 @@ def load_scenario(path: str | Path) -> Scenario:
     )
     doc.finish()
     return scenario
+
+
+def _pause(raw: Table) -> tuple[float, float] | None:
+    """``pause_at_s`` and ``pause_for_s``: both or neither."""
+    given = [key for key in ("pause_at_s", "pause_for_s") if key in raw.doc]
+    if not given:
+        return None
+    if len(given) == 1:
+        raise raw.fail("pause_at_s and pause_for_s go together", given[0])
+    return raw.number("pause_at_s", low=0.0), raw.number("pause_for_s", low=0.0, above=True)

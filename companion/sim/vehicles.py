@@ -17,6 +17,7 @@ from ..mission import MissionItem
 from ..tasks import spawn
 from .mock_autopilot import Faults, FlightModel, MockAutopilot
 from .px4 import Px4Build, Px4Error, Px4Vehicle
+from .px4.link import PX4_AUTO_LOITER, PX4_AUTO_MISSION, PX4_MODE_AUTO
 
 Track = list[tuple[float, float, float, float]]  # (simulated s, lat, lon, alt AMSL)
 RESOLVED_TOLERANCE_M = 0.5  # two mocks: a pair is resolved at the offset minus this
@@ -43,6 +44,10 @@ class ReplayVehicle(Protocol):
     def restart_clock(self, origin: float) -> None: ...
 
     async def take_off(self) -> None: ...
+
+    async def pause(self) -> None: ...
+
+    async def resume(self) -> None: ...
 
     async def held_mission(self) -> list[MissionItem]: ...
 
@@ -99,6 +104,12 @@ class MockVehicle:
 
     async def take_off(self) -> None:
         self.mock.take_off()
+
+    async def pause(self) -> None:
+        self.mock.pause()
+
+    async def resume(self) -> None:
+        self.mock.resume()
 
     async def held_mission(self) -> list[MissionItem]:
         return list(self.mock.mission)
@@ -169,6 +180,13 @@ class Px4SitlVehicle:
 
     async def take_off(self) -> None:
         await self.vehicle.take_off()
+
+    async def pause(self) -> None:
+        """AUTO.LOITER, as MAVSDK's pause_mission and a ground station's hold switch."""
+        await self.vehicle.set_mode(PX4_MODE_AUTO, PX4_AUTO_LOITER)
+
+    async def resume(self) -> None:
+        await self.vehicle.set_mode(PX4_MODE_AUTO, PX4_AUTO_MISSION)
 
     async def held_mission(self) -> list[MissionItem]:
         """What PX4 holds, read over the GCS link.  PX4 runs one mission transfer at a time:

@@ -19,7 +19,7 @@ from ..mock_links import parse_datagram
 from .build import Px4Error
 
 # PX4 custom_mode in HEARTBEAT: main mode in bits 16-23, sub mode in 24-31
-PX4_MODE_AUTO, PX4_AUTO_MISSION = 4, 4
+PX4_MODE_AUTO, PX4_AUTO_LOITER, PX4_AUTO_MISSION = 4, 3, 4
 
 MISSION_STATE_COMPLETE = 5  # MISSION_CURRENT.mission_state (PX4 v1.16 sends 0)
 
@@ -281,6 +281,13 @@ class Px4Link:
                         return int(ack.result)
                     deadline = loop.time() + timeout_s  # in progress: wait for the result
         raise Px4Error(f"no COMMAND_ACK for command {command} within {timeout_s} s")
+
+    async def set_mode(self, main: int, sub: int) -> None:
+        """MAV_CMD_DO_SET_MODE to PX4's (main, sub) mode, as MAVSDK's pause and start do."""
+        flag = float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+        result = await self.command(mavlink.MAV_CMD_DO_SET_MODE, flag, float(main), float(sub))
+        if result != mavlink.MAV_RESULT_ACCEPTED:
+            raise Px4Error(f"mode ({main}, {sub}) refused ({result_name(result)})")
 
     async def take_off(self, first_item: int = 0, timeout_s: float = 10.0) -> None:
         """Start the mission at ``first_item``: MAV_CMD_MISSION_START, which on PX4 switches to

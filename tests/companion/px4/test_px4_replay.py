@@ -39,3 +39,23 @@ def test_crossing_on_two_px4_vehicles(px4_build: Px4Build) -> None:
     assert pair["closest_approach_m"] >= report["offset_m"] - pair["resolved_tolerance_m"]
     assert report["conflicts_resolved"] == report["conflicts"] == 1
     assert report["false_alarms"] == 0
+
+
+def test_first_leg_crossing_on_two_px4_vehicles(px4_build: Px4Build) -> None:
+    """Drone 2 hovers over a mast in the middle of drone 1's first leg; drone 1 learns it in
+    flight, on that leg.  PX4 flies a leg as a straight 3-D line, so raising only the leg's
+    far end would pass the mast half way up the ramp: the companion inserts a waypoint at
+    the raised altitude ahead of the vehicle (marked current, PX4 flies on from it) and the
+    two PX4 vehicles pass at least the offset apart, less PX4's altitude error."""
+    scenario = load_scenario(SCENARIOS / "sep_first_leg.toml")
+    report = asyncio.run(run_replay(scenario, px4=px4_build)).report.to_json()
+    assert report["finished"], report
+    first, second = report["drones"]
+    assert first["vehicle"] == second["vehicle"] == "px4-sitl"
+    assert first["edit"] == "verified" and first["vehicle_holds"] == "edited"
+    assert any(edit["inserted"] is not None for edit in first["edits"])  # the leg was split
+    assert not second["edits"]
+    (pair,) = report["pairs"]
+    assert pair["conflict"] and pair["resolved"] and pair["inside_s"] == 0
+    assert pair["closest_approach_m"] >= report["offset_m"] - pair["resolved_tolerance_m"]
+    assert report["false_alarms"] == report["made_worse"] == 0

@@ -21,7 +21,7 @@ def _drone(ident: int, **changes: Any) -> dict[str, Any]:
         "flagged_segments": [0] if ident == 1 else [],
         "edits": [],
         "edit": "not needed",
-        "levels": {},
+        "raises": {},
         "runs": [],
         "precautionary": [],
         "failures": [],
@@ -45,16 +45,21 @@ GOOD: dict[str, Any] = {
     "time_scale": 40.0,
     "finished": True,
     "offset_m": 10.0,
-    "drones": [_drone(1, edit="verified", levels={"0": 1}), _drone(2)],
+    "drones": [_drone(1, edit="verified", raises={"0": 15.0}), _drone(2)],
     "pairs": [
         {
             "drones": [1, 2],
             "trusted": True,
             "paths_cross": True,
+            "paths_near": True,
             "conflict": True,
             "acted": True,
             "resolved": True,
-            "closest_approach_m": 10.1,
+            "made_worse": False,
+            "false_alarm": False,
+            "inside_s": 0.0,
+            "inside_baseline_s": 3.1,
+            "closest_approach_m": 15.1,
             "closest_approach_baseline_m": 0.3,
             "closest_approach_t_s": 184.0,
             "resolved_tolerance_m": 0.5,
@@ -65,6 +70,9 @@ GOOD: dict[str, Any] = {
     "untrusted_conflicts": 0,
     "precautionary_actions": 0,
     "false_alarms": 0,
+    "made_worse": 0,
+    "separation_m": 15.0,
+    "vertical_separation_m": 10.0,
 }
 
 
@@ -80,14 +88,14 @@ def test_a_clean_replay_says_ok() -> None:
     assert ReplayReport.from_json(report.to_json()) == report  # --out reads back the same
     text = format_report(report)
     assert text.splitlines()[-1].startswith("OK: every mission flown")
-    assert "flies segments 0 (+10 m) higher (upload verified)" in text
+    assert "flies segments 0 (+15 m) higher (upload verified)" in text
     assert "drone 2 (px4, fleet): kept its altitude (no edit needed)" in text
 
 
 def _plan_failed(r: dict[str, Any]) -> None:
     r["drones"][0] |= {
         "edit": "failed",
-        "levels": {},
+        "raises": {},
         "failures": [{"kind": "plan_failed", "error": "item 1: -40.0 m below the minimum"}],
     }
     r["pairs"][0] |= {"conflict": False, "resolved": False}
@@ -99,8 +107,23 @@ def _time_limit(r: dict[str, Any]) -> None:
 
 
 def _unresolved(r: dict[str, Any]) -> None:
-    r["pairs"][0] |= {"resolved": False, "closest_approach_m": 0.6}
+    r["pairs"][0] |= {"resolved": False, "closest_approach_m": 0.6, "inside_s": 2.0}
     r["conflicts_resolved"] = 0
+
+
+def _made_worse(r: dict[str, Any]) -> None:
+    """A climb into the band of a drone 10 m higher: 12.6 m without, 7.9 m with."""
+    r["pairs"][0] |= {
+        "conflict": False,
+        "resolved": False,
+        "made_worse": True,
+        "closest_approach_baseline_m": 12.6,
+        "closest_approach_m": 7.9,
+        "inside_s": 4.0,
+        "inside_baseline_s": 0.0,
+    }
+    r["conflicts"] = r["conflicts_resolved"] = 0
+    r["made_worse"] = 1
 
 
 def _unfinished_run(r: dict[str, Any]) -> None:
@@ -108,7 +131,10 @@ def _unfinished_run(r: dict[str, Any]) -> None:
 
 
 def _false_alarm(r: dict[str, Any]) -> None:
-    r["false_alarms"] = 2
+    """A climb for a drone 60 m above, which never came inside the protected volume."""
+    r["pairs"][0] |= {"conflict": False, "resolved": False, "false_alarm": True}
+    r["conflicts"] = r["conflicts_resolved"] = 0
+    r["false_alarms"] = 1
 
 
 def test_what_does_not_fail_a_replay_is_still_stated() -> None:
@@ -154,8 +180,9 @@ def test_a_retried_run_alone_still_qualifies_the_ok() -> None:
     [
         (_plan_failed, "drone 1: plan failed: item 1: -40.0 m below the minimum"),
         (_time_limit, "the time limit ended the replay"),
-        (_unresolved, "drones 1-2: conflict NOT resolved (closest approach 0.6 m"),
-        (_false_alarm, "2 segment(s) flagged that do not cross"),
+        (_unresolved, "drones 1-2: conflict NOT resolved (2 s inside the protected volume"),
+        (_made_worse, "drones 1-2: made WORSE by the companion (closest approach 12.6 m"),
+        (_false_alarm, "drones 1-2: false alarm (an edit or precaution, but never inside"),
     ],
 )
 def test_every_failure_is_stated_and_fails_the_replay(change: Any, says: str) -> None:
