@@ -249,6 +249,12 @@ def _parser() -> argparse.ArgumentParser:
         help="fly PX4 SITL (SIH) vehicles from the build in DIR (bin/px4, etc/) instead of mocks",
     )
     replay.add_argument(
+        "--virtual",
+        action="store_true",
+        help="fly in virtual time: mock vehicles in this process, no MAVLink or MAVSDK (minutes "
+        "of flight in seconds, the same on a busy machine; MAVLink faults need the default)",
+    )
+    replay.add_argument(
         "--px4-speed",
         type=cli.number(0, 100, above=True),
         default=None,

@@ -106,7 +106,8 @@ class AliceRuns(Edits):
                 elif phase == "near":
                     peer.full_after = self._full_deadline(peer, horizon)
             else:
-                peer.plan = []
+                if not peer.busy:  # (busy: the plan stands, the same run is asked again)
+                    peer.plan = []
                 retry = self.settings.retry_after_s if peer.retry_in is None else peer.retry_in
                 peer.next_try, peer.retry_in = self.clock.now() + retry, None
             self._wake.set()  # look again at once
@@ -340,6 +341,7 @@ class AliceRuns(Edits):
         the peer for a little more of its path than it shows of its own (:meth:`_bob_horizon`)
         so that the full run after it can leave out what the near run decided."""
         peer.role = Role.ALICE
+        peer.busy = False
         asked = horizon
         for attempt in range(2):
             grid = self._grid(path)
@@ -421,6 +423,7 @@ class AliceRuns(Edits):
                     # moment: others it refused are waiting too).
                     low, high = self.settings.busy_retry_s
                     peer.retry_in = low + (high - low) * secrets.randbelow(1001) / 1000
+                    peer.busy = True
                     self.record(EventKind.PEER_BUSY, peer=peer.node, phase=phase)
                     return False
                 if exc.code is Refusal.UNKNOWN_PEER:

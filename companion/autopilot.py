@@ -1,23 +1,31 @@
-"""Mission I/O with the vehicle through MAVSDK 4.1 (native asyncio API, ``mission_raw``).
+"""The vehicle as the companion sees it: mission I/O and telemetry, through MAVSDK 4.1
+(native asyncio API, ``mission_raw``, ``telemetry``).
 
-Connect, download and normalise, upload and verify.  The one promise: after
-:meth:`Autopilot.replace_mission` the vehicle holds either the new mission or the old one,
-never a mix -- the upload is read back and compared item by item by what the autopilot
-*means* (:meth:`companion.autopilots.Personality.same_meaning`: PX4 reads frame 3 back as 6,
-wraps yaw, zeroes parameters it does not keep), and on any failure the original is uploaded
-again (or, if the vehicle held none, the mission cleared) and read back before the error is
-raised.  A mission the autopilot would refuse is refused before anything is sent.  Read-backs
-wait ``settle_s`` after an upload and are retried (PX4 returns the previous mission to about
-2.5 % of downloads 10 ms after an upload).  Every call is bounded by a timeout; a silent or
-vanished autopilot is an :class:`AutopilotError`, never a hang.
+:class:`AutopilotBase` is what the companion asks of an autopilot -- its mission (download,
+replace, pause, resume), its home and four telemetry streams (position, armed, holding,
+mission progress) -- with the one promise of a mission edit in one place; :class:`Autopilot`
+does it over MAVSDK (a real vehicle, PX4 SITL, the mock autopilot over MAVLink), and
+:class:`companion.sim.inproc.InProcessAutopilot` with a mock vehicle in the same process
+(replays in virtual time).  Connect, download and normalise, upload and verify.  The one
+promise: after :meth:`AutopilotBase.replace_mission` the vehicle holds either the new mission
+or the old one, never a mix -- the upload is read back and compared item by item by what
+the autopilot *means* (:meth:`companion.autopilots.Personality.same_meaning`: PX4 reads
+frame 3 back as 6, wraps yaw, zeroes parameters it does not keep), and on any failure the
+original is uploaded again (or, if the vehicle held none, the mission cleared) and read
+back before the error is raised.  A mission the autopilot would refuse is refused before
+anything is sent.  Read-backs wait ``settle_s`` after an upload and are retried (PX4
+returns the previous mission to about 2.5 % of downloads 10 ms after an upload).  Every
+call is bounded by a timeout; a silent or vanished autopilot is an :class:`AutopilotError`,
+never a hang.
 """
 
 from __future__ import annotations
 
+import abc
 import asyncio
 import ipaddress
 import logging
-from collections.abc import Sequence
+from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -134,18 +142,142 @@ def from_mavsdk(raw: Any) -> MissionItem:
     return item
 
 
-class Autopilot:
-    """One vehicle: ``async with Autopilot.connect("udpin://0.0.0.0:14540") as ap: ...``."""
+@dataclass(frozen=True, slots=True)
+class Position:
+    """One position report: degrees, metres above mean sea level and above home."""
+
+    lat_deg: float
+    lon_deg: float
+    amsl_m: float
+    relative_m: float
+
+
+class AutopilotBase(abc.ABC):
+    """What the companion asks of its vehicle.  Subclasses move missions and telemetry;
+    :meth:`replace_mission` (upload, read back, restore on failure) is this class's."""
+
+    def __init__(self, timeouts: Timeouts, personality: Personality) -> None:
+        self.timeouts = timeouts
+        self.personality = personality
+
+    # -- what a vehicle link provides
+
+    @abc.abstractmethod
+    async def download(self) -> list[MissionItem]:
+        """The vehicle's mission, normalised (seq 0..n-1, one current item)."""
+
+    @abc.abstractmethod
+    async def _upload(self, items: Sequence[MissionItem]) -> None: ...
+
+    @abc.abstractmethod
+    async def clear(self) -> None:
+        """Remove the vehicle's mission."""
+
+    @abc.abstractmethod
+    async def home(self, timeout_s: float = 5.0) -> tuple[int, int, float] | None:
+        """The vehicle's home (lat, lon degE7, alt AMSL), or None when it has none yet."""
+
+    @abc.abstractmethod
+    async def pause(self) -> None:
+        """Hold position (PX4: AUTO.LOITER, ArduPilot: LOITER), the mission kept."""
+
+    @abc.abstractmethod
+    async def resume(self) -> None:
+        """Continue the mission from the current item."""
+
+    @abc.abstractmethod
+    def positions(self, rate_hz: float) -> AsyncIterator[Position]:
+        """Position reports, about ``rate_hz`` a second."""
+
+    @abc.abstractmethod
+    def armed_states(self) -> AsyncIterator[bool]:
+        """Whether the vehicle is armed, on every change at least."""
+
+    @abc.abstractmethod
+    def holding_states(self) -> AsyncIterator[bool]:
+        """Whether it holds in the air (paused, or its mission over): when it flies on is
+        not known."""
+
+    @abc.abstractmethod
+    def progress(self) -> AsyncIterator[tuple[int, int]]:
+        """Mission progress: (current item, items), on every change at least."""
+
+    async def close(self) -> None:  # noqa: B027 -- optional: nothing to let go of by default
+        """Let go of the vehicle."""
+
+    async def __aenter__(self) -> AutopilotBase:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    # -- the one promise of an edit
+
+    def _matches(self, held: Sequence[MissionItem], sent: Sequence[MissionItem]) -> bool:
+        same = self.personality.same_meaning
+        return len(held) == len(sent) and all(same(b, a) for a, b in zip(held, sent, strict=True))
+
+    async def _verify(self, items: Sequence[MissionItem]) -> bool:
+        """Read back until the vehicle holds ``items`` (by meaning) or the tries are spent."""
+        sent = normalise(items) if items else []
+        for attempt in range(max(self.timeouts.readbacks, 1)):
+            await asyncio.sleep(self.timeouts.settle_s * (attempt + 1))
+            held = await self.download()
+            if self._matches(held, sent):
+                return True
+        return False
+
+    async def _put(self, items: Sequence[MissionItem]) -> bool:
+        """Upload (an empty mission: clear) and verify."""
+        if items:
+            await self._upload(items)
+        else:
+            await self.clear()
+        return await self._verify(items)
+
+    async def replace_mission(
+        self, new: Sequence[MissionItem], original: Sequence[MissionItem]
+    ) -> None:
+        """Upload ``new`` and verify it; on failure restore and verify ``original`` (an
+        empty ``original``: the mission is cleared).  A mission the autopilot would refuse
+        raises :class:`~companion.autopilots.UnsupportedItem` before anything is sent."""
+        if not new:
+            raise MissionError("refusing to upload an empty mission")
+        if not any(it.current for it in new):  # MAVSDK would mark item 0: a restart
+            raise MissionError("an upload must mark the item to continue at as current")
+        new = normalise(new)
+        self.personality.check(new)
+        try:
+            if await self._put(new):
+                return
+            problem: Exception = AutopilotError("read-back differs from the upload")
+        except AutopilotError as exc:
+            problem = exc
+        log.warning("mission edit failed (%s); restoring the original", problem)
+        try:
+            restored = await self._put(original)
+        except AutopilotError as exc:
+            raise AutopilotError(
+                f"edit failed ({problem}) and restoring the original failed too ({exc}); "
+                "the vehicle's mission is unknown"
+            ) from exc
+        if not restored:
+            raise AutopilotError(f"edit failed ({problem}); the restored mission differs")
+        raise RolledBack(f"edit failed ({problem}); the vehicle holds its previous mission")
+
+
+class Autopilot(AutopilotBase):
+    """One vehicle over MAVSDK: ``async with Autopilot.connect("udpin://0.0.0.0:14540") as
+    ap: ...``."""
 
     def __init__(
         self, mavsdk: Any, system: Any, timeouts: Timeouts, personality: Personality = PX4
     ) -> None:
         from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
 
+        super().__init__(timeouts, personality)
         self._mavsdk = mavsdk
         self.system = system
-        self.timeouts = timeouts
-        self.personality = personality
         self.mission_raw = MissionRawAsync(system)
 
     @classmethod
@@ -187,8 +319,58 @@ class Autopilot:
     async def __aenter__(self) -> Autopilot:
         return self
 
-    async def __aexit__(self, *exc: object) -> None:
-        await self.close()
+    async def positions(self, rate_hz: float) -> AsyncIterator[Position]:
+        """GLOBAL_POSITION_INT.  PX4 sends it at 50 Hz on the onboard link (500 Hz in SITL at
+        10x); a few a second is plenty and keeps MAVSDK's callbacks keeping up."""
+        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+        telemetry = TelemetryAsync(self.system)
+
+        async def set_rate() -> None:
+            try:
+                await asyncio.wait_for(telemetry.set_rate_position(rate_hz), 5.0)
+            except Exception as exc:  # any MAVSDK error: keep the default rate
+                log.info("position rate unchanged: %s", exc)
+
+        # Positions flow while the rate is asked for: an autopilot that never answers the
+        # request would otherwise hold the first position back 5 s (100 s of flight at 20x).
+        rate = asyncio.create_task(set_rate())
+        try:
+            async for p in telemetry.subscribe_position():
+                yield Position(
+                    float(p.latitude_deg),
+                    float(p.longitude_deg),
+                    float(p.absolute_altitude_m),
+                    float(p.relative_altitude_m),
+                )
+        finally:
+            rate.cancel()
+            telemetry.destroy()
+
+    async def armed_states(self) -> AsyncIterator[bool]:
+        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+        telemetry = TelemetryAsync(self.system)
+        try:
+            async for armed in telemetry.subscribe_armed():
+                yield bool(armed)
+        finally:
+            telemetry.destroy()
+
+    async def holding_states(self) -> AsyncIterator[bool]:
+        """MAVSDK's flight mode HOLD: PX4 AUTO.LOITER, ArduPilot LOITER."""
+        from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
+
+        telemetry = TelemetryAsync(self.system)
+        try:
+            async for mode in telemetry.subscribe_flight_mode():
+                yield mode == FlightMode.HOLD
+        finally:
+            telemetry.destroy()
+
+    async def progress(self) -> AsyncIterator[tuple[int, int]]:
+        async for progress in self.mission_raw.subscribe_mission_progress():
+            yield int(progress.current), int(progress.total)
 
     async def position(self, timeout_s: float = 5.0) -> tuple[float, float, float]:
         """The vehicle's latest (lat, lon, alt AMSL) from GLOBAL_POSITION_INT telemetry."""
@@ -259,55 +441,3 @@ class Autopilot:
     async def clear(self) -> None:
         """Remove the vehicle's mission (MISSION_CLEAR_ALL)."""
         await self._call("mission clear", self.mission_raw.clear_mission)
-
-    def _matches(self, held: Sequence[MissionItem], sent: Sequence[MissionItem]) -> bool:
-        same = self.personality.same_meaning
-        return len(held) == len(sent) and all(same(b, a) for a, b in zip(held, sent, strict=True))
-
-    async def _verify(self, items: Sequence[MissionItem]) -> bool:
-        """Read back until the vehicle holds ``items`` (by meaning) or the tries are spent."""
-        sent = normalise(items) if items else []
-        for attempt in range(max(self.timeouts.readbacks, 1)):
-            await asyncio.sleep(self.timeouts.settle_s * (attempt + 1))
-            held = await self.download()
-            if self._matches(held, sent):
-                return True
-        return False
-
-    async def _put(self, items: Sequence[MissionItem]) -> bool:
-        """Upload (an empty mission: clear) and verify."""
-        if items:
-            await self._upload(items)
-        else:
-            await self.clear()
-        return await self._verify(items)
-
-    async def replace_mission(
-        self, new: Sequence[MissionItem], original: Sequence[MissionItem]
-    ) -> None:
-        """Upload ``new`` and verify it; on failure restore and verify ``original`` (an
-        empty ``original``: the mission is cleared).  A mission the autopilot would refuse
-        raises :class:`~companion.autopilots.UnsupportedItem` before anything is sent."""
-        if not new:
-            raise MissionError("refusing to upload an empty mission")
-        if not any(it.current for it in new):  # MAVSDK would mark item 0: a restart
-            raise MissionError("an upload must mark the item to continue at as current")
-        new = normalise(new)
-        self.personality.check(new)
-        try:
-            if await self._put(new):
-                return
-            problem: Exception = AutopilotError("read-back differs from the upload")
-        except AutopilotError as exc:
-            problem = exc
-        log.warning("mission edit failed (%s); restoring the original", problem)
-        try:
-            restored = await self._put(original)
-        except AutopilotError as exc:
-            raise AutopilotError(
-                f"edit failed ({problem}) and restoring the original failed too ({exc}); "
-                "the vehicle's mission is unknown"
-            ) from exc
-        if not restored:
-            raise AutopilotError(f"edit failed ({problem}); the restored mission differs")
-        raise RolledBack(f"edit failed ({problem}); the vehicle holds its previous mission")

@@ -167,6 +167,7 @@ class Beaconing(Edits):
         if peer is not None and peer.identity != neighbour.fingerprint:
             self._forget(src)  # another drone holds this node id now
             peer = None
+        new_peer = peer is None
         if peer is None:
             peer = self.peers[src] = Peer(src, beacon, now, identity=neighbour.fingerprint)
             self.record(
@@ -179,9 +180,20 @@ class Beaconing(Edits):
             self._beacon_now.set()  # let it hear us without waiting an interval
         elif hearing.new_keys:
             self._drop_setups(src)  # it restarted (a new beacon key): they are gone on its side
-        slots_changed = peer.beacon.slots != beacon.slots
+        slots_changed = peer.beacon.slots != beacon.slots or new_peer
+        if beacon.slots.top > peer.beacon.slots.top:
+            peer.raised = True  # it climbed above what it flew when first heard
         peer.heard(beacon, now, self.position[:2])
-        if slots_changed and (peer.conflicts or src in self.precaution):
+        # Our raises keep clear of every peer's slots (a run compared the altitudes we fly
+        # without them); of two drones that raised into each other's slots the higher node
+        # moves, so two never climb past each other in turn.  A peer heard for the first
+        # time is news to both.
+        raised = bool(self._ahead(self.raises)) and (new_peer or src < self.settings.node)
+        # A raised higher node that moved keeps clear of us: no chasing it (its move may
+        # be one away from our raise).
+        yields = peer.raised and src > self.settings.node and not new_peer
+        ours = (bool(peer.conflicts) or src in self.precaution) and not yields
+        if slots_changed and (ours or raised):
             self._spawn(self._replan(f"peer {src} announced altitude slots"))
         self._wake.set()
 

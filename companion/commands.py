@@ -217,25 +217,33 @@ def replay(args: argparse.Namespace) -> int:
     from .sim.export import export
     from .sim.plot import plot_report
     from .sim.px4 import Px4Error, find_build
-    from .sim.replay import PX4_SPEED_MAX, run_replay
+    from .sim.replay import PX4_SPEED_MAX, run_replay, run_virtual
     from .sim.report import format_report
-    from .sim.scenario import load_scenario
+    from .sim.scenario import ScenarioError, load_scenario
 
     level = args.log_level or ("info" if args.log_json else "warning")
     logs.setup(level, args.log_json, stderr_level=args.log_level or "warning", mavsdk=True)
     scenario = load_scenario(args.scenario)  # all checked before anything starts
+    if args.virtual and args.px4:
+        raise cli.InputError("--virtual and --px4 exclude each other (PX4 SITL runs in real time)")
     try:
         build = find_build(args.px4) if args.px4 else None
     except Px4Error as exc:
         raise cli.InputError(f"PX4 SITL: {exc}") from None
-    replay = asyncio.run(
-        run_replay(
-            scenario,
-            progress=not args.json,
-            px4=build,
-            px4_speed_max=PX4_SPEED_MAX if args.px4_speed is None else args.px4_speed,
+    if args.virtual:
+        try:
+            replay = run_virtual(scenario, progress=not args.json)
+        except ScenarioError as exc:
+            raise cli.InputError(str(exc)) from None
+    else:
+        replay = asyncio.run(
+            run_replay(
+                scenario,
+                progress=not args.json,
+                px4=build,
+                px4_speed_max=PX4_SPEED_MAX if args.px4_speed is None else args.px4_speed,
+            )
         )
-    )
     report = replay.report
     if args.out:
         cli.write_atomic(args.out, json.dumps(report.to_json(), indent=2) + "\n")

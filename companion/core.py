@@ -32,7 +32,7 @@ from . import logs
 from .auth.beacon_keys import BeaconKeys
 from .auth.session import BOOT_SIZE, Identity
 from .auth.trust import TrustStore
-from .autopilot import Autopilot
+from .autopilot import AutopilotBase
 from .beacon import alice_of, keys_hash
 from .beacon_budget import beacon_interval
 from .budget import RunLedger, RunLimits
@@ -62,6 +62,7 @@ log = logging.getLogger("companion")
 OVER_ITEM_M = 5.0  # this close to its current item's point, the vehicle is holding there
 TIMING_LOOK_S = 180.0  # how far ahead the timing watch predicts (the full schedule is kept)
 TIMING_EVERY_S = 5.0  # and how often
+PREDICTIONS_KEPT = 8  # schedules remembered for a vehicle state (several paths and limits)
 NEAR_SEGMENTS = 2  # each side of a near run compares at least its next two segments
 SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one),
 SIGNED_EVERY = 30  # and at most every 30th beacon (a duty cycle stretches beacons to minutes)
@@ -146,7 +147,7 @@ class CompanionCore:
         self,
         settings: CompanionSettings,
         endpoint: LinkEndpoint,
-        autopilot: Autopilot,
+        autopilot: AutopilotBase,
         credentials: Credentials,
     ) -> None:
         self.settings = settings
@@ -207,6 +208,10 @@ class CompanionCore:
         self._over_item: tuple[int, float] | None = None  # (current item, over it since)
         self._progress_seen: tuple[int, int, float] = (0, 0, 0.0)  # (current, of, when)
         self._planned: Schedule | None = None  # the original mission from the ground
+        self._predictions: dict[
+            tuple[object, ...], tuple[list[MissionItem], FlightPath, Schedule]
+        ] = {}  # the last few schedules, by what they were predicted from
+        self._slots_of: tuple[tuple[object, ...], Slots] | None = None  # (for what, slots)
         self._ground_since: float | None = None  # on the ground: since when its windows hold
         self._ground_retimes = 0  # ... and how often they were moved on there (each doubles)
         self.flagged: set[int] = set()  # segments the comparisons found in conflict
@@ -271,9 +276,13 @@ class CompanionCore:
 
     @property
     def comparing(self) -> bool:
-        """A comparison as Alice is under way or half done (a drone about to take off waits
-        for it)."""
-        return self._busy.locked() or any(p.plan for p in self.peers.values())
+        """A comparison as Alice is under way, half done, or put off by a peer busy with its
+        own (a drone about to take off waits for it); not one half done with a peer that has
+        since gone out of range or fallen silent: it resumes if they meet again."""
+        return self._busy.locked() or any(
+            (p.plan or p.busy) and self._pending(p) and not self._silent_for(p)
+            for p in self.peers.values()
+        )
 
     @property
     def on_ground(self) -> bool:
@@ -449,7 +458,13 @@ class CompanionCore:
             self.held and not self.on_ground,
             self._ground_wait_left(),
         )
-        return predict(
+        # The same prediction is asked for again and again between two telemetry samples
+        # (a run's plan, its volumes, the fail-safe): flown once per vehicle state.
+        key = (id(items), id(path), home, start, vehicle, limit_s)
+        hit = self._predictions.get(key)
+        if hit is not None and hit[0] is items and hit[1] is path:
+            return hit[2]
+        schedule = predict(
             path,
             items,
             home,
@@ -459,6 +474,10 @@ class CompanionCore:
             home_is_item0=self.settings.ardupilot,
             limit_s=limit_s,
         )
+        self._predictions[key] = (items, path, schedule)
+        while len(self._predictions) > PREDICTIONS_KEPT:
+            self._predictions.pop(next(iter(self._predictions)))
+        return schedule
 
     def _ground_allowance(self) -> float:
         """How long a drone on the ground is assumed to wait before it takes off, counted
@@ -604,15 +623,22 @@ class CompanionCore:
         return run_volumes(self.settings.separation, grid.resolution_mm, epoch_s)
 
     def _slots(self) -> Slots:
-        """The altitude slots the rest of our flight occupies, as the vehicle flies it."""
+        """The altitude slots the rest of our flight occupies, as the vehicle flies it.  They
+        change with the mission, the item flown to and the altitude the vehicle is at (to
+        the metre: a slot is 5 m), not with each position report: remembered for those."""
         start, points = self._remaining_flown()
         if len(points) < 2:
             return Slots.of([(self.position[2], self.position[2])])
+        key = (self.version, self.current_item, self.on_ground, round(self.relative_alt))
+        if self._slots_of is not None and self._slots_of[0] == key:
+            return self._slots_of[1]
         schedule = self._schedule(self.mission, self.flown, start, self.current_item)
         tolerance = self.settings.separation.tolerance
-        return Slots.of(
+        slots = Slots.of(
             schedule.cruise(k, tolerance) for k in range(start, start + len(points) - 1)
         )
+        self._slots_of = (key, slots)
+        return slots
 
     def _grid(self, path: list[tuple[int, int]]) -> GridSpec:
         lat, lon = self.position[:2]

@@ -181,10 +181,19 @@ class Edits(CompanionCore):
         lead = max(self.speed_m_s, 1.0) / self.kinematics.climb_m_s
         return PlanVehicle(segment, lat, lon, self.relative_alt, amsl, lead)
 
+    def _keeps_clear_of(self, peer: Peer) -> bool:
+        """Whether our raises keep clear of the altitude slots of ``peer`` even where we do
+        not conflict with it (a run compared the altitudes we fly without raises): of a peer
+        that flies its own altitudes, and of a lower node's.  Of two drones that raised into
+        each other's slots the higher node moves (it hears the lower one's new slots and
+        re-plans), so two never climb past each other in turn."""
+        return not peer.raised or peer.node < self.settings.node
+
     async def _replan(self, why: str) -> None:
         """Upload the raises the conflicts and precautions call for, if they changed."""
         async with self._edit_lock:
             offset = self.settings.offset
+            clear_of = sorted(n for n, p in self.peers.items() if self._keeps_clear_of(p))
             try:
                 raises = plan_raises(
                     {node: p.conflicts for node, p in self.peers.items()},
@@ -194,6 +203,7 @@ class Edits(CompanionCore):
                     offset.offset_m,
                     self.settings.separation.vertical_m,
                     1.0 if offset.direction == "up" else -1.0,
+                    keep_clear=clear_of,
                 )
             except NoClearAltitude as exc:
                 self.record(EventKind.PLAN_FAILED, error=str(exc))
@@ -258,5 +268,6 @@ class Edits(CompanionCore):
                 verified=True,
                 offset_m=offset.delta,
                 inserted=edit.inserted,
+                clear_of=clear_of,  # peers whose altitudes the raises keep clear of as well
                 why=why,
             )

@@ -12,7 +12,12 @@ other one.  So a drone crossing one that cruises 5 m higher
 climbs past it with the separation, never into its altitude; a peer whose band is already
 clear is no conflict at all (the comparison's bands say so).  With three or more drones a
 drone can be Alice to one peer and Bob to another: each announces its new slots at once, and
-a drone that must stay clear of them re-plans.
+a drone that must stay clear of them re-plans.  A run compares Alice's path as planned,
+without her raises, so a raise must not carry a segment into the altitudes of a peer the
+runs found clear of the unraised path: raises keep clear of the slots of every peer that
+flies its own altitudes and of every lower node's too (``keep_clear``); of two drones that
+raised into each other's slots the higher node moves, and a drone does not chase a higher
+node that moved, so two never climb past each other in turn.
 
 What a peer learns: which 5 m slots the drone occupies somewhere on its remaining path -- not
 where, not which segment, not its altitude to better than 5 m (its beacon's current altitude
@@ -59,6 +64,11 @@ class Slots:
                 mask |= 1 << min(slot - base, SLOTS - 1)
         return cls(min(base, 0xFFFF), mask)
 
+    @property
+    def top(self) -> int:
+        """The highest occupied slot (-1: none)."""
+        return self.base + self.mask.bit_length() - 1 if self.mask else -1
+
     def intervals(self) -> list[tuple[float, float]]:
         """The occupied altitudes (metres AMSL) as closed intervals, merged."""
         out: list[tuple[float, float]] = []
@@ -80,18 +90,22 @@ def clear_raise(
     offset_m: float,
     vertical_m: float,
     direction: float = 1.0,
+    others: Iterable[Slots] = (),
 ) -> float:
     """The least raise (a multiple of SLOT_M, at least ``offset_m``; negative for
-    ``direction`` -1) after which ``band`` is at least ``vertical_m`` clear of every peer's
-    slots: above its lowest occupied interval, above or below each other one."""
-    occupied = [slots.intervals() for slots in peers]
+    ``direction`` -1) after which ``band`` is at least ``vertical_m`` clear of every
+    conflicting peer's slots -- above its lowest occupied interval, above or below each other
+    one -- and of every slot of ``others`` (peers it does not conflict with where it flies
+    now: above or below)."""
+    occupied = [(slots.intervals(), 1) for slots in peers]
+    occupied += [(slots.intervals(), 0) for slots in others]
     steps = math.ceil(offset_m / SLOT_M)
     while steps * SLOT_M <= MAX_RAISE_M:
         delta = direction * steps * SLOT_M
         low, high = band[0] + delta, band[1] + delta
         if all(
-            low >= top + vertical_m or (k > 0 and high <= bottom - vertical_m)
-            for spans in occupied
+            low >= top + vertical_m or (k >= first and high <= bottom - vertical_m)
+            for spans, first in occupied
             for k, (bottom, top) in enumerate(spans)
         ):
             return delta
@@ -107,11 +121,14 @@ def plan_raises(
     offset_m: float,
     vertical_m: float,
     direction: float = 1.0,
+    keep_clear: Iterable[int] = (),
 ) -> dict[int, float]:
     """Segment -> raise (metres) for the conflicts found and the precautions taken (peer ->
     segments): each clear of the slots of the peers it conflicts with (``slots``, peer ->
-    announced), its band (``bands``: the segment's planned band, AMSL) raised.  A precaution
-    is a conflict until its result is in."""
+    announced), its band (``bands``: the segment's planned band, AMSL) raised, and clear of
+    the slots of the peers in ``keep_clear`` too: a run compared the altitudes we fly
+    without raises, so a raise must not bring a segment into the altitudes of a peer that
+    runs found clear of them.  A precaution is a conflict until its result is in."""
     peers_of: dict[int, set[int]] = {}
     for table in (conflicts, precautions):
         for peer, segments in table.items():
@@ -120,5 +137,8 @@ def plan_raises(
     out: dict[int, float] = {}
     for segment, peers in sorted(peers_of.items()):
         announced = [slots.get(peer, Slots()) for peer in peers]
-        out[segment] = clear_raise(bands[segment], announced, offset_m, vertical_m, direction)
+        others = [slots[p] for p in keep_clear if p not in peers and p in slots]
+        out[segment] = clear_raise(
+            bands[segment], announced, offset_m, vertical_m, direction, others
+        )
     return out

@@ -89,6 +89,8 @@ class Peer:
     next_try: float = 0.0
     retry_in: float | None = None  # after a run without result: retry this soon (None: the
     # settings' retry_after_s)
+    busy: bool = False  # it refused our last request BUSY: asked again soon
+    raised: bool = False  # its announced altitude slots once reached above its first ones
     conflicts: set[int] = field(default_factory=set)  # our segments that meet its path
     plan: list[tuple[str, int]] = field(default_factory=list)  # runs still to do (phase, horizon)
     plan_version: tuple[int, int] | None = None  # the versions the plan was made for

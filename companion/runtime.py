@@ -19,7 +19,8 @@ stop the process from serving other peers: nothing raises out of a run.
 :class:`Companion` is assembled from one part per concept on a shared core
 (:mod:`companion.core`): :mod:`companion.beaconing`, :mod:`companion.alice_runs`,
 :mod:`companion.bob_answers` and :mod:`companion.edits`; this module starts and stops it and
-follows the vehicle through MAVSDK.
+follows the vehicle through its autopilot's telemetry (:class:`companion.autopilot.AutopilotBase`:
+MAVSDK, or a mock vehicle in the same process).
 """
 
 from __future__ import annotations
@@ -109,65 +110,37 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
         self.store.close()
 
     async def _telemetry(self) -> None:
-        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
-
-        telemetry = TelemetryAsync(self.autopilot.system)
         last: tuple[float, tuple[int, int], float] | None = None
-        try:
-            # PX4 sends GLOBAL_POSITION_INT at 50 Hz on the onboard link (500 Hz in SITL at
-            # 10x); a few per second is plenty here and keeps MAVSDK's callbacks keeping up
-            try:
-                await asyncio.wait_for(telemetry.set_rate_position(POSITION_RATE_HZ), 5.0)
-            except Exception as exc:  # any MAVSDK error: keep the default rate
-                log.info("position rate unchanged: %s", exc)
-            async for p in telemetry.subscribe_position():
-                self._heard_autopilot = time.monotonic()
-                self.position = (
-                    round(p.latitude_deg * 1e7),
-                    round(p.longitude_deg * 1e7),
-                    float(p.absolute_altitude_m),
-                )
-                self.position_at = self.clock.now()
-                was_on_ground = self.on_ground
-                self.relative_alt = float(p.relative_altitude_m)
-                self._note_position()
-                if was_on_ground and not self.on_ground:
-                    self.has_flown = True
-                    self._beacon_now.set()  # taking off: announce it
-                now = self.clock.now()
-                if last is None or now - last[0] >= 1.0:
-                    if last is not None:
-                        moved = distance_m(last[1], self.position[:2]) / (now - last[0])
-                        self.speed_m_s = 0.5 * (self.speed_m_s + moved)
-                        self.climb_m_s = (self.relative_alt - last[2]) / (now - last[0])
-                    last = (now, self.position[:2], self.relative_alt)
-        finally:
-            telemetry.destroy()
+        async for p in self.autopilot.positions(POSITION_RATE_HZ):
+            self._heard_autopilot = time.monotonic()
+            self.position = (round(p.lat_deg * 1e7), round(p.lon_deg * 1e7), p.amsl_m)
+            self.position_at = self.clock.now()
+            was_on_ground = self.on_ground
+            self.relative_alt = p.relative_m
+            self._note_position()
+            if was_on_ground and not self.on_ground:
+                self.has_flown = True
+                self._beacon_now.set()  # taking off: announce it
+            now = self.clock.now()
+            if last is None or now - last[0] >= 1.0:
+                if last is not None:
+                    moved = distance_m(last[1], self.position[:2]) / (now - last[0])
+                    self.speed_m_s = 0.5 * (self.speed_m_s + moved)
+                    self.climb_m_s = (self.relative_alt - last[2]) / (now - last[0])
+                last = (now, self.position[:2], self.relative_alt)
 
     async def _armed(self) -> None:
-        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
-
-        telemetry = TelemetryAsync(self.autopilot.system)
-        try:
-            async for armed in telemetry.subscribe_armed():
-                if armed and not self.armed and self.relative_alt < 1.0:
-                    self.has_flown = True  # departing: its path is flown from here on
-                    self._beacon_now.set()  # taking off: announce it
-                self.armed = bool(armed)
-        finally:
-            telemetry.destroy()
+        async for armed in self.autopilot.armed_states():
+            if armed and not self.armed and self.relative_alt < 1.0:
+                self.has_flown = True  # departing: its path is flown from here on
+                self._beacon_now.set()  # taking off: announce it
+            self.armed = armed
 
     async def _flight_mode(self) -> None:
         """Is the vehicle holding in the air (PX4 AUTO.LOITER, ArduPilot LOITER: paused by
         an operator or by us, or its mission over)?  Then when it flies on is unknown."""
-        from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
-
-        telemetry = TelemetryAsync(self.autopilot.system)
-        try:
-            async for mode in telemetry.subscribe_flight_mode():
-                self.held = mode == FlightMode.HOLD
-        finally:
-            telemetry.destroy()
+        async for held in self.autopilot.holding_states():
+            self.held = held
 
     async def _autopilot_watch(self) -> None:
         """Warn when the autopilot's position stops coming (real seconds: MAVLink streams run
@@ -196,8 +169,7 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
             self._keep_time()
 
     async def _progress(self) -> None:
-        async for progress in self.autopilot.mission_raw.subscribe_mission_progress():
-            current, total = int(progress.current), int(progress.total)
+        async for current, total in self.autopilot.progress():
             self._progress_seen = (current, total, self.clock.now())
             if total == len(self.mission) or not self._edit_lock.locked():
                 self.current_item = current

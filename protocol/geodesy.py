@@ -9,6 +9,7 @@ is the same metre everywhere (a sphere of radius 6371 km differs from the ellips
 
 from __future__ import annotations
 
+import functools
 import math
 
 A = 6378137.0  # WGS84 semi-major axis (m)
@@ -16,8 +17,10 @@ F = 1 / 298.257223563  # flattening
 E2 = F * (2 - F)  # first eccentricity squared
 
 
+@functools.lru_cache(maxsize=4096)
 def ecef(lat_deg: float, lon_deg: float, height_m: float = 0.0) -> tuple[float, float, float]:
-    """Earth-centred, Earth-fixed coordinates (m) of a WGS84 point."""
+    """Earth-centred, Earth-fixed coordinates (m) of a WGS84 point (remembered for the last
+    few thousand points: a flight asks for the same waypoints at every step)."""
     lat, lon = math.radians(lat_deg), math.radians(lon_deg)
     n = A / math.sqrt(1 - E2 * math.sin(lat) ** 2)
     return (
@@ -30,16 +33,19 @@ def ecef(lat_deg: float, lon_deg: float, height_m: float = 0.0) -> tuple[float, 
 def east_north(lat0: float, lon0: float, lat1: float, lon1: float) -> tuple[float, float]:
     """(east, north) metres of point 1 on the tangent plane at point 0 (both at height 0)."""
     x, y, z = ecef(lat1, lon1)
-    x0, y0, z0 = ecef(lat0, lon0)
+    x0, y0, z0, sin_lam, cos_lam, sin_phi, cos_phi = _plane(lat0, lon0)
     dx, dy, dz = x - x0, y - y0, z - z0
-    phi, lam = math.radians(lat0), math.radians(lon0)
-    east = -math.sin(lam) * dx + math.cos(lam) * dy
-    north = (
-        -math.sin(phi) * math.cos(lam) * dx
-        - math.sin(phi) * math.sin(lam) * dy
-        + math.cos(phi) * dz
-    )
+    east = -sin_lam * dx + cos_lam * dy
+    north = -sin_phi * cos_lam * dx - sin_phi * sin_lam * dy + cos_phi * dz
     return east, north
+
+
+@functools.lru_cache(maxsize=4096)
+def _plane(lat0: float, lon0: float) -> tuple[float, float, float, float, float, float, float]:
+    """The tangent plane at a point: its ECEF origin and the sines and cosines of its
+    longitude and latitude."""
+    phi, lam = math.radians(lat0), math.radians(lon0)
+    return (*ecef(lat0, lon0), math.sin(lam), math.cos(lam), math.sin(phi), math.cos(phi))
 
 
 def ground_offset(lat0: float, lon0: float, lat1: float, lon1: float) -> tuple[float, float]:

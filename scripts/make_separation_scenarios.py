@@ -167,30 +167,34 @@ mast, not half way up a ramp to a raised waypoint.""",
         time_limit_s=450,
         time_scale=25,
     )
-    # Six drones in two groups, each compared on the ground before take-off (their tracks
-    # are parallel, 1.2 to 1.5 km apart): three fly east across a 3 km square; three take
-    # off 5.5 km south of it, out of radio range, and fly north across it after the first
-    # three have passed -- those nine pairs meet on the radio in flight, minutes before
-    # their tracks cross, and compare then.  No two drones come within 300 m.
+    # Six drones in two groups (their tracks parallel, 1.5 to 2 km apart): three fly east
+    # across a 4 km square from the start, and compare in flight; three wait on the ground
+    # 5.5 km south of it, out of radio range of the first three, until they have compared
+    # with each other (at least two minutes), and fly north across the square after the
+    # first three have passed.  Nine pairs' ground tracks cross, minutes apart; no two drones
+    # come within 500 m.  On one channel the second group's comparisons queue behind the
+    # first group's, so its take-offs spread over ten minutes (a busy sky, issue 29).
     waves = [
-        ("sep_six_1", [(-1500, 1500), (-750, 1500), (0, 1500), (750, 1500), (1500, 1500)]),
-        ("sep_six_2", [(-1500, 0), (-750, 0), (0, 0), (750, 0), (1500, 0)]),
-        ("sep_six_3", [(-1500, -1500), (-750, -1500), (0, -1500), (750, -1500), (1500, -1500)]),
-        ("sep_six_4", [(-1200, -7000), (-1200, -2250), (-1200, -750), (-1200, 750), (-1200, 2250)]),
-        ("sep_six_5", [(0, -7000), (0, -2250), (0, -750), (0, 750), (0, 2250)]),
-        ("sep_six_6", [(1200, -7000), (1200, -2250), (1200, -750), (1200, 750), (1200, 2250)]),
+        ("sep_six_1", [(-2000, 2000), (-700, 2000), (700, 2000), (2000, 2000)]),
+        ("sep_six_2", [(-2000, 0), (-700, 0), (700, 0), (2000, 0)]),
+        ("sep_six_3", [(-2000, -2000), (-700, -2000), (700, -2000), (2000, -2000)]),
+        ("sep_six_4", [(-1500, -7500), (-1500, -2600), (-1500, 0), (-1500, 2600)]),
+        ("sep_six_5", [(0, -7500), (0, -2600), (0, 0), (0, 2600)]),
+        ("sep_six_6", [(1500, -7500), (1500, -2600), (1500, 0), (1500, 2600)]),
     ]  # fmt: skip
     for name, legs in waves:
         mission(name, legs)
     scenario(
         "sep_six",
-        """Six drones whose tracks cross at different times: three cross a 3 km square east
-side by side, three more take off 5.5 km south of it and cross it north after them.  Nine
-pairs' tracks cross, every one five minutes apart or more; no two drones come within 300 m.
-Each group compares on the ground before take-off, the nine pairs across the groups in
-flight, minutes before their tracks cross.  No conflict: no edit and no precaution.""",
-        [(name, "hold_for_comparisons = true") for name, _ in waves],
+        """Six drones whose tracks cross at different times: three cross a 4 km square east
+side by side, three more wait 5.5 km south of it until they have compared with each other and
+then cross it north, after the first three have passed.  Nine pairs' tracks cross, minutes
+apart; no two drones come within 500 m.  No conflict: no edit and no precaution.""",
+        [
+            (name, "takeoff_delay_s = 120\nhold_for_comparisons = true" if i >= 3 else "")
+            for i, (name, _) in enumerate(waves)
+        ],
         seed=39,
-        time_limit_s=1300,
+        time_limit_s=3000,
         time_scale=50,
     )

@@ -23,23 +23,14 @@ from .paper_shaped import (
     write_paper_shaped,
 )
 
-CPU = "cpu"  # everything else
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Under ``make test`` (two workers, ``--dist loadgroup``) every test not in the real-time
-    group joins one group of its own, so one worker runs the replays and the other the rest:
-    a replay never shares its worker with a CPU-heavy test."""
-    for item in items:
-        if not any(True for _ in item.iter_markers("xdist_group")):
-            item.add_marker(pytest.mark.xdist_group(CPU))
+REALTIME = "realtime"  # the replays over MAVSDK, in scaled real time
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
     """Under ``--dist loadgroup`` every grouped test's node id must carry its group (that is
     how pytest-xdist keeps a group on one worker); a pytest whose node ids it cannot mark
-    would run the replays beside the CPU-heavy tests without a word: refuse to run."""
+    would run the replays beside each other and the CPU-heavy tests without a word: refuse
+    to run."""
     config = session.config
     if not (os.environ.get("PYTEST_XDIST_WORKER") and config.getvalue("loadgroup")):
         return
@@ -56,13 +47,15 @@ _niced = False
 
 @pytest.fixture(autouse=True)
 def _yield_to_replays(request: pytest.FixtureRequest) -> Iterator[None]:
-    """The worker that runs the CPU-heavy tests runs them at a lower priority (nice 10): the
-    replays on the other worker, whose mock vehicles, companions and MAVSDK servers must keep
-    up with scaled real time, get the processor first when both want it.  (Only under
-    xdist; a plain ``pytest`` run is left as it is.)"""
+    """Under ``make test`` one worker takes the real-time replays first (their group is the
+    largest unit of work: pytest-xdist hands it out first), and every other test runs at a
+    lower priority (nice 10, from a worker's first such test on): the replays' mock
+    vehicles, companions and MAVSDK servers, which must keep up with scaled real time, get
+    the processor first when both workers want it.  (Only under xdist; a plain ``pytest``
+    run is left as it is.)"""
     global _niced
     groups = {m.args[0] for m in request.node.iter_markers("xdist_group") if m.args}
-    if not _niced and CPU in groups and os.environ.get("PYTEST_XDIST_WORKER"):
+    if not _niced and REALTIME not in groups and os.environ.get("PYTEST_XDIST_WORKER"):
         os.nice(10)
         _niced = True
     yield

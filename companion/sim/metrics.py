@@ -107,9 +107,12 @@ def closest(
     return best
 
 
-def _acted(c: Companion, peer: int, until: float) -> bool:
+def _acted(c: Companion, peer: int, until: float, *, clear_of: bool = True) -> bool:
     """Did this companion act on its pair with ``peer`` before ``until``: a precautionary
-    action for it, or a verified edit that flies a segment a result flagged for it higher?"""
+    action for it, a verified edit that flies a segment a result flagged for it higher, or
+    a verified edit whose raises were chosen clear of its altitudes (a raise for a third
+    drone that keeps out of a peer the runs found clear of the unraised path; not with
+    ``clear_of`` False: keeping clear of a peer is no alarm about it)?"""
     if any(
         e.kind is K.PRECAUTIONARY and e.detail.get("peer") == peer and e.t <= until
         for e in c.events
@@ -125,7 +128,10 @@ def _acted(c: Companion, peer: int, until: float) -> bool:
         e.kind is K.UPLOADED
         and e.t <= until
         and e.detail.get("verified")
-        and flagged & {int(k) for k in e.detail.get("raises", {})}
+        and (
+            flagged & {int(k) for k in e.detail.get("raises", {})}
+            or (clear_of and peer in e.detail.get("clear_of", []))
+        )
         for e in c.events
     )
 
@@ -138,6 +144,8 @@ def build_report(
     baseline: dict[int, Track],
     finished: bool,
     time_scale: float,
+    *,
+    virtual: bool = False,
 ) -> ReplayReport:
     """The report of a replay (judged: problems and notes filled in)."""
     first = scenario.drones[0]
@@ -230,7 +238,8 @@ def build_report(
             # a pair with an operator outside the trust store is deliberately not deconflicted
             acted = trusted and (_acted(companions[a], b, met) or _acted(companions[b], a, met))
             ever = trusted and (
-                _acted(companions[a], b, math.inf) or _acted(companions[b], a, math.inf)
+                _acted(companions[a], b, math.inf, clear_of=False)
+                or _acted(companions[b], a, math.inf, clear_of=False)
             )
             ok = conflict and acted and inside_after == 0
             made_worse = with_companion < without - tolerance and inside_after > 0
@@ -263,6 +272,7 @@ def build_report(
         scenario=scenario.name,
         link=LinkInfo(scenario.link_profile, scenario.loss, scenario.seed),
         time_scale=time_scale,
+        virtual_time=virtual,
         finished=finished,
         offset_m=scenario.offset_m,
         drones=drones,

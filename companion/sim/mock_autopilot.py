@@ -91,8 +91,22 @@ class MockAutopilot(MockFlight):
 
     # ------------------------------------------------------------------ lifecycle
 
-    async def start(self, origin: float | None = None) -> MockAutopilot:
-        """Open the links and run; ``origin`` (a time of :attr:`now`) is simulated time zero."""
+    async def start(self, origin: float | None = None, *, links: bool = True) -> MockAutopilot:
+        """Open the links and run; ``origin`` (a time of :attr:`now`) is simulated time zero.
+        Without ``links`` it only flies: no MAVLink, for a caller in this process
+        (:mod:`companion.sim.inproc`)."""
+        if links:
+            await self._open_links()
+        self._started = time.monotonic()
+        self.origin = self.now() if origin is None else origin
+        self._tasks = [spawn(self._fly(), name=f"mock-{self.sysid}-flight", log=log)]
+        if links:  # a failure is logged when it happens (the mock would go quiet)
+            self._tasks.append(
+                spawn(self._heartbeats(), name=f"mock-{self.sysid}-heartbeats", log=log)
+            )
+        return self
+
+    async def _open_links(self) -> None:
         self.api_link = Link("api", self.host, self.bind_port, self.send_port, self.sysid, self._on)
         self.links = [self.api_link]
         if self.gcs_bind_port:
@@ -107,13 +121,6 @@ class MockAutopilot(MockFlight):
             for link in self.links:
                 link.close()
             raise
-        self._started = time.monotonic()
-        self.origin = self.now() if origin is None else origin
-        self._tasks = [  # a failure is logged when it happens (the mock would go quiet)
-            spawn(self._heartbeats(), name=f"mock-{self.sysid}-heartbeats", log=log),
-            spawn(self._fly(), name=f"mock-{self.sysid}-flight", log=log),
-        ]
-        return self
 
     async def stop(self) -> None:
         for task in self._tasks:
@@ -263,7 +270,8 @@ class MockAutopilot(MockFlight):
         time scale, recording every step; send telemetry once per wake-up."""
         period = 1.0 / self.flight.rate_hz
         while True:
-            await asyncio.sleep(period)
+            # parked and disarmed (waiting for its take-off) nothing moves: a look a second
+            await asyncio.sleep(period if self.armed or self.flying else max(period, 1.0))
             if self._vanished():
                 continue
             target = self.sim_time()

@@ -155,12 +155,19 @@ class MissionServer:
         )
         self._reply(link, count)
 
+    def held(self, kind: int = 0) -> list[MissionItem]:
+        """A store as a download gives it: the mission with the vehicle's current item marked."""
+        return [
+            it.replace(current=int(kind == 0 and seq == self.current))
+            for seq, it in enumerate(self.stores.get(kind, []))
+        ]
+
     def _on_mission_request_int(self, link: Link, m: Any, *, legacy: bool = False) -> None:
-        store = self.stores.get(m.mission_type, [])
+        store = self.held(m.mission_type)
         if not 0 <= m.seq < len(store):
             self._ack(link, m, mavlink.MAV_MISSION_INVALID_SEQUENCE, m.mission_type)
             return
-        it = store[m.seq].replace(current=int(m.mission_type == 0 and m.seq == self.current))
+        it = store[m.seq]
         self._reply(
             link, item_message(self.mav, m.get_srcSystem(), m.get_srcComponent(), it, legacy=legacy)
         )
@@ -243,8 +250,16 @@ class MissionServer:
         self._on_mission_item_int(link, m, legacy=True)
 
     def _commit(self, link: Link, m: Any, items: list[MissionItem]) -> None:
-        """Replace the store at once (never a mix), as the firmware holds the items."""
+        """The upload's last item arrived: store it (:meth:`store`) and acknowledge."""
         kind = m.mission_type
+        self.store(kind, items)
+        self._ack(link, m, ACCEPTED, kind)
+        if kind == 0:
+            self._report_current()
+
+    def store(self, kind: int, items: list[MissionItem]) -> None:
+        """Replace a store at once (never a mix), as the firmware holds the items: what an
+        accepted upload does, over MAVLink or from a caller in this process."""
         marked = next((i for i, it in enumerate(items) if it.current), None)
         if self._garbles_left and items:  # a partial/garbled write, caught by read-back
             self._garbles_left -= 1
@@ -257,9 +272,6 @@ class MissionServer:
         if kind == 0:
             self.uploads_accepted += 1
             self._mission_replaced(marked)
-        self._ack(link, m, ACCEPTED, kind)
-        if kind == 0:
-            self._report_current()
 
     # ------------------------------------------------------------------ clear
 
@@ -268,12 +280,16 @@ class MissionServer:
         if not all(kind in self.stores for kind in kinds):
             self._ack(link, m, mavlink.MAV_MISSION_UNSUPPORTED, m.mission_type)
             return
+        self.clear(kinds)
+        self._ack(link, m, ACCEPTED, m.mission_type)
+        if 0 in kinds:
+            self._report_current()
+
+    def clear(self, kinds: list[int]) -> None:
+        """Empty the stores ``kinds`` (ArduPilot keeps its home as item 0 of the mission)."""
         for kind in kinds:
             self.stores[kind] = []
         if 0 in kinds:
             if self.personality.home_is_item0:
                 self.stores[0] = [self._home_item()]
             self._mission_cleared()
-        self._ack(link, m, ACCEPTED, m.mission_type)
-        if 0 in kinds:
-            self._report_current()

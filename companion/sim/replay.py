@@ -1,4 +1,5 @@
-"""Scripted replays: mock autopilots (or PX4 SITL), real MAVSDK, companions, one radio.
+"""Scripted replays: mock autopilots (or PX4 SITL), real MAVSDK, companions, one radio --
+or, in virtual time, mock vehicles in this process (:mod:`companion.sim.inproc`).
 
 ``drone-deconflict replay SCENARIO.toml``.  Each drone of the scenario
 (:mod:`companion.sim.scenario`) gets a :class:`~companion.sim.mock_autopilot.MockAutopilot` on
@@ -23,18 +24,20 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..autopilot import Autopilot
+from ..autopilot import Autopilot, AutopilotBase
 from ..autopilots import personality
 from ..events import Event, EventKind
 from ..failsafe import FailsafeSettings
-from ..link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile
+from ..link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile, run_simulated
+from ..link.clock import VirtualTimeLoop
 from ..planner import OffsetSettings
 from ..runtime import Companion, CompanionSettings
 from ..schedule import SeparationSettings
 from ..tasks import spawn
 from .fleet import make_fleet
+from .inproc import InProcessVehicle
 from .metrics import build_report
-from .mock_autopilot import FlightModel, MockAutopilot
+from .mock_autopilot import Faults, FlightModel, MockAutopilot
 from .paced_clock import PacedClock
 from .px4 import Px4Build
 from .report import ReplayReport
@@ -47,6 +50,8 @@ log = logging.getLogger(__name__)
 # (33 s at 4x, 40 s at 6x: the companions' CPU time counts 10x over in simulated time with
 # two px4 processes taking 1.2 cores) and the drones met at 4 m
 PX4_SPEED_MAX = 5.0
+VIRTUAL_RATE_HZ = 5.0  # a virtual replay's vehicles step (and report) this often
+VIRTUAL_LOOK_S = 0.2  # and the schedule (take-offs, holds, the end) is looked at this often
 
 
 @dataclass(frozen=True)
@@ -129,6 +134,13 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
     started: set[int] = set()
     t, dt = 0.0, 1.0 / rate
     while t < scenario.time_limit_s:
+        waiting = [d.takeoff_delay_s for d in scenario.drones if d.id not in started]
+        if waiting and not any(m.flying for m in mocks.values()) and min(waiting) > t + dt:
+            idle = min(waiting) - t  # nobody in the air before the next take-off: one step
+            for mock in mocks.values():
+                mock.advance(idle)
+            t += idle
+            continue
         for d in scenario.drones:
             mock = mocks[d.id]
             if d.id not in started and t >= d.takeoff_delay_s:
@@ -149,27 +161,49 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
     return {k: m.trajectory for k, m in mocks.items()}
 
 
+def run_virtual(scenario: Scenario, *, progress: bool = False) -> Replay:
+    """Fly ``scenario`` in virtual time (:func:`run_replay` with ``virtual``, on its own
+    :class:`~companion.link.clock.VirtualTimeLoop`)."""
+    return run_simulated(run_replay(scenario, progress=progress, virtual=True))
+
+
 async def run_replay(
     scenario: Scenario,
     *,
     progress: bool = False,
     px4: Px4Build | None = None,
     px4_speed_max: float = PX4_SPEED_MAX,
+    virtual: bool = False,
 ) -> Replay:
-    """Fly ``scenario``: mock autopilots, or PX4 SITL vehicles from the build ``px4`` (their
-    speed factor, and so the replay's time scale, at most ``px4_speed_max``)."""
+    """Fly ``scenario``: mock autopilots over MAVLink and MAVSDK, PX4 SITL vehicles from the
+    build ``px4`` (their speed factor, and so the replay's time scale, at most
+    ``px4_speed_max``), or -- ``virtual`` -- mock vehicles in this process
+    (:mod:`companion.sim.inproc`) on a virtual clock (run it on a
+    :class:`~companion.link.clock.VirtualTimeLoop`: :func:`run_virtual`)."""
+    if virtual and px4 is not None:
+        raise ScenarioError("PX4 SITL runs in real time: no virtual replay with it")
+    if virtual and not isinstance(asyncio.get_running_loop(), VirtualTimeLoop):
+        raise RuntimeError("a virtual replay runs on a VirtualTimeLoop (run_virtual)")
+    faulty = [d.id for d in scenario.drones if d.faults != Faults()]
+    if virtual and faulty:
+        raise ScenarioError(f"drones {faulty}: MAVLink faults need the replay over MAVSDK")
     ts = scenario.time_scale if px4 is None else min(scenario.time_scale, px4_speed_max)
     # Mocks fly on a clock paced by this process (a busy machine does not pass as flight
-    # time); PX4 SITL keeps lock-step real time, so with it the plain scaled clock.
-    paced = PacedClock(ts) if px4 is None else None
-    clock = paced or Clock(ts)
+    # time); PX4 SITL keeps lock-step real time, so with it the plain scaled clock; a virtual
+    # replay's clock is its loop's, and every step's CPU passes as link time.
+    paced = PacedClock(ts) if px4 is None and not virtual else None
+    clock = paced or (Clock(charges_cpu=True) if virtual else Clock(ts))
     medium = SimMedium(Channel(Impairments(loss=scenario.loss), scenario.seed), clock)
     link = profile(scenario.link_profile)
     mocks: dict[int, ReplayVehicle] = {}
     companions: dict[int, Companion] = {}
     vanished: dict[int, Companion] = {}
-    autopilots: list[Autopilot] = []
-    flight = FlightModel(cruise_m_s=scenario.cruise_m_s, time_scale=ts, rate_hz=20.0)
+    autopilots: list[AutopilotBase] = []
+    flight = FlightModel(
+        cruise_m_s=scenario.cruise_m_s,
+        time_scale=1.0 if virtual else ts,
+        rate_hz=VIRTUAL_RATE_HZ if virtual else 20.0,
+    )
     origin = clock.now()  # simulated time zero for every vehicle and the schedule
     state = tempfile.TemporaryDirectory(prefix="replay-state-")
     fleet = make_fleet(
@@ -187,7 +221,11 @@ async def run_replay(
     try:
         for d in scenario.drones:
             vehicle: ReplayVehicle
-            if px4 is None:
+            if virtual:
+                vehicle = InProcessVehicle(
+                    d.mission, d.home, ardupilot=d.ardupilot, flight=flight, clock=clock
+                )
+            elif px4 is None:
                 vehicle = MockVehicle(
                     d.mission,
                     d.home,
@@ -211,7 +249,11 @@ async def run_replay(
                 )
             mocks[d.id] = vehicle
             await vehicle.start(origin)
-            ap = await Autopilot.connect(vehicle.api_url, personality=personality(d.ardupilot))
+            ap: AutopilotBase
+            if isinstance(vehicle, InProcessVehicle):
+                ap = vehicle.autopilot
+            else:
+                ap = await Autopilot.connect(vehicle.api_url, personality=personality(d.ardupilot))
             autopilots.append(ap)
             settings = CompanionSettings(
                 node=d.id,
@@ -230,7 +272,8 @@ async def run_replay(
             )
             endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
             companions[d.id] = Companion(settings, endpoint, ap, fleet[d.id])
-            say(f"drone {d.id}: {vehicle.kind} vehicle and MAVSDK up")
+            via = "MAVSDK" if isinstance(ap, Autopilot) else "no MAVLink"
+            say(f"drone {d.id}: {vehicle.kind} vehicle up ({via})")
         # The companions start together: one set up earlier would have the radio (and its
         # first runs) to itself while the others' vehicles still start.
         await asyncio.gather(*(companion.start() for companion in companions.values()))
@@ -278,7 +321,10 @@ async def run_replay(
             done = len(started) == len(mocks) and not any(m.flying for m in mocks.values())
             if done or sim >= scenario.time_limit_s:
                 break
-            await asyncio.sleep(0.01)
+            if virtual:
+                await clock.sleep(VIRTUAL_LOOK_S)
+            else:
+                await asyncio.sleep(0.01)
         say(f"t={sim:.0f} s: {'all missions flown' if done else 'time limit'}")
     finally:
         for companion in companions.values():
@@ -302,7 +348,9 @@ async def run_replay(
         state.cleanup()
     baseline = _fly_offline(scenario)
     return Replay(
-        build_report(scenario, mocks, held, companions | vanished, baseline, done, ts),
+        build_report(
+            scenario, mocks, held, companions | vanished, baseline, done, ts, virtual=virtual
+        ),
         Tracks(
             {k: m.trajectory for k, m in mocks.items()},
             baseline,

@@ -22,6 +22,8 @@ VEHICLE_NAMES = {
     ("mock", "px4"): "px4",
     ("mock", "ardupilot"): "ardupilot",
     ("px4-sitl", "px4"): "PX4 SITL",
+    ("in-process", "px4"): "px4, in process",
+    ("in-process", "ardupilot"): "ardupilot, in process",
 }
 
 Detail = dict[str, Any]  # a companion event's detail as JSON (its kind's own fields)
@@ -114,6 +116,7 @@ class ReplayReport:
     precautionary_actions: int
     false_alarms: int  # pairs with an edit or a precaution that never came inside without
     made_worse: int = 0  # pairs the companion brought closer, inside the protected volume
+    virtual_time: bool = False  # flown in virtual time, vehicles in process (no MAVSDK)
     separation_m: float = 15.0  # the protected volume: horizontally
     vertical_separation_m: float = 10.0  # and vertically
     problems: list[str] = field(default_factory=list)
@@ -240,7 +243,8 @@ def format_report(report: ReplayReport) -> str:
     """The replay as text: what each drone did, each pair's separation, and every problem."""
     lines = [
         f"Replay {report.scenario} over {report.link.profile} "
-        f"(loss {report.link.loss:.0%}), time scale {report.time_scale}x"
+        f"(loss {report.link.loss:.0%}), "
+        + ("in virtual time" if report.virtual_time else f"time scale {report.time_scale}x")
         + ("" if report.finished else " -- TIME LIMIT REACHED before every mission was flown")
         + ":"
     ]
