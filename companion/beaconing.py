@@ -115,7 +115,10 @@ class Beaconing(Edits):
             if (self._sessions or self.endpoint.busy()) and not urgent and deferred < 3:
                 # A run is on the air: a beacon would only collide with its frames.
                 deferred += 1
-            elif self.position[:2] != (0, 0):
+            elif self.position[:2] == (0, 0):
+                wait = 1.0  # no position from the autopilot yet: beacon once there is one
+                continue  # (on a duty-cycled link the interval would lose minutes)
+            else:
                 deferred = 0
                 await self._send_beacon(*self._beacon())
             wait = self.beacon_interval * _JITTER.uniform(0.7, 1.3)

@@ -21,7 +21,7 @@ from ..autopilot import AutopilotBase, AutopilotError, Position, Timeouts
 from ..link.clock import Clock
 from ..mission import MissionError, MissionItem, normalise
 from .mock_autopilot import FlightModel, MockAutopilot
-from .vehicles import Track
+from .vehicles import MockVehicle
 
 ON_CHANGE_S = 0.5  # link seconds between looks at a state reported on change (armed, ...)
 T = TypeVar("T")
@@ -87,14 +87,14 @@ class InProcessAutopilot(AutopilotBase):
         return self._on_change(lambda: (self.mock.current, len(self.mock.mission)))
 
 
-class InProcessVehicle:
+class InProcessVehicle(MockVehicle):
     """A replay vehicle (:class:`~companion.sim.vehicles.ReplayVehicle`) in this process:
-    the mock autopilot flying on the replay's clock, without MAVLink."""
+    the mock autopilot flying on the replay's clock, without MAVLink (the MAVLink mock's
+    vehicle otherwise)."""
 
     kind = "in-process"
-    altitude_accuracy_m = 0.25  # the kinematic model flies exactly (as the mock over MAVLink)
 
-    def __init__(
+    def __init__(  # (no ports, no MAVLink faults: nothing goes over a link)
         self,
         mission: list[MissionItem],
         home: tuple[float, float, float],
@@ -112,31 +112,5 @@ class InProcessVehicle:
     def api_url(self) -> str:
         return "in-process"
 
-    @property
-    def flying(self) -> bool:
-        return self.mock.mission_running or self.mock.holding
-
-    @property
-    def trajectory(self) -> Track:
-        return self.mock.trajectory
-
     async def start(self, origin: float) -> None:
         await self.mock.start(origin, links=False)
-
-    def restart_clock(self, origin: float) -> None:
-        self.mock.restart_clock(origin)
-
-    async def take_off(self) -> None:
-        self.mock.take_off()
-
-    async def pause(self) -> None:
-        self.mock.pause()
-
-    async def resume(self) -> None:
-        self.mock.resume()
-
-    async def held_mission(self) -> list[MissionItem]:
-        return list(self.mock.mission)
-
-    async def stop(self) -> None:
-        await self.mock.stop()
