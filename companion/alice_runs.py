@@ -42,8 +42,8 @@ from .schedule import route_volumes
 
 log = logging.getLogger("companion")
 NEAR_SLACK_S = 30.0  # the near run reaches this far past the earliest possible meeting
-NEAR_SLACK = 1.25  # a first run takes this much longer than its airtime estimate (measured:
-# 1.2-1.4 with a fresh OT setup on US915 SF7 at 10 % loss, the setup's computing; 1.05 without)
+NEAR_SLACK = 1.1  # a first run takes this much longer than its estimate (measured on US915
+# SF7 at 10 % loss: 35-41 s against 36.5 s with a fresh OT setup, the setup's computing)
 BOB_GUESS = 4  # Bob's size before he tells it: a remaining route of a few legs (m x m would
 # stretch the horizon of a long route over everything; the run watch uses his real size)
 QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a full run
@@ -113,9 +113,11 @@ class AliceRuns(Edits):
             self._wake.set()  # look again at once
 
     def _full_deadline(self, peer: Peer, horizon: int) -> float:
-        """When the full run must start at the latest: before we leave what the near run
-        compared, and before the peer can be beyond what it showed (its horizon), less the
-        run's estimated time and the margin.  On the ground: at once."""
+        """When the full run must start at the latest: so that its result comes before we
+        leave what the near run compared, and before the near run's decisions expire (the
+        peer may be past the path it showed: its horizon at its speed from the near run's
+        start, :meth:`_decided`), less the margin -- a full run of our whole remaining path
+        against the peer's (its beacon's size class).  On the ground: at once."""
         now = self.clock.now()
         if self.on_ground:
             return now
@@ -128,10 +130,18 @@ class AliceRuns(Edits):
             for k, (a, b) in enumerate(itertools.pairwise(path))
             if k <= (covered[-1] if covered else -1)
         )
+        ends = now + left / speed
+        if peer.near_run is not None:
+            started, shown = peer.near_run
+            ends = min(
+                ends, started + shown / max(self._peer_speed(peer), self.settings.cruise_m_s)
+            )
         grid = self._grid(path)
-        m = Limits().padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
-        slack = min(left, horizon) / speed - self._seconds(m, grid, fresh=False)
-        return now + max(slack - self.settings.failsafe.margin_s, 0.0)
+        limits = Limits()
+        m = limits.padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
+        n = limits.padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        latest = ends - self._seconds(m, grid, fresh=False, n=n) - self.settings.failsafe.margin_s
+        return max(latest, now)
 
     def _phases(self, peer: Peer) -> list[tuple[str, int]]:
         """The runs a comparison with ``peer`` takes: near (what can be reached soon) when the
@@ -208,20 +218,26 @@ class AliceRuns(Edits):
         fresh: bool,
     ) -> int:
         """How far the peer cuts its path in a near run where ours is ``path`` (from segment
-        ``start``): as far as it can fly (at cruise speed) until we leave the last of our
-        segments, late by our tolerance, plus the margin and the separation.  Our near
+        ``start``): as far as it can fly (at its speed, at least cruise) until we leave the
+        last of our segments, late by our tolerance, plus the margin and the separation.  Our near
         segments are then flown before the peer can be past its cut, and the full run need
         not compare them again (:meth:`_decided_by_near`).  But a longer cut may make the
         peer's side of the near run larger (up to its whole remaining path, its beacon's size
         class): only when even that run, its estimate stretched by ``NEAR_SLACK`` (the OT
         setup's computing, collisions), still ends before the peer could be here; otherwise
-        -- and on the ground, whose windows never close -- ``horizon`` as asked."""
+        -- and on the ground, whose windows never close -- ``horizon`` as asked, stretched to
+        the same time ahead at the peer's speed (the near run's decisions last as long as
+        the horizon at the peer's speed, :meth:`_decided`)."""
+        # The same time ahead as ours: the peer may fly faster than we do.
+        ours = max(self.speed_m_s, self.settings.cruise_m_s)
+        theirs = max(self._peer_speed(peer), self.settings.cruise_m_s)
+        horizon = max(horizon, math.ceil(horizon * theirs / ours))
         schedule = self._schedule(self.original, self.path, start, self.original_current)
         last = start + len(path) - 2
         end = schedule.window(last, self.settings.separation.tolerance)[1]
         if not math.isfinite(end):
             return horizon
-        reach = self.settings.cruise_m_s * (end + self.settings.failsafe.margin_s)
+        reach = theirs * (end + self.settings.failsafe.margin_s)
         longer = math.ceil(reach + self.settings.separation.horizontal_m)
         if longer <= horizon:
             return horizon

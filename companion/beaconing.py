@@ -186,7 +186,10 @@ class Beaconing(Edits):
         slots_changed = peer.beacon.slots != beacon.slots or new_peer
         if beacon.slots.top > peer.beacon.slots.top:
             peer.raised = True  # it climbed above what it flew when first heard
-        peer.heard(beacon, now, self.position[:2])
+        # Its stamp is whole Unix seconds (truncated): the position is half a second older
+        # on average; in link time (the wall clock is link time plus an offset).
+        made_at = beacon.time + 0.5 - (self.clock.wall() - now)
+        peer.heard(beacon, now, self.position[:2], made_at=made_at)
         # Our raises keep clear of every peer's slots (a run compared the altitudes we fly
         # without them); of two drones that raised into each other's slots the higher node
         # moves, so two never climb past each other in turn.  A peer heard for the first

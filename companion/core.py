@@ -654,10 +654,18 @@ class CompanionCore:
         return None if self.on_ground or self.position[:2] == (0, 0) else self.position[:2]
 
     def _seconds(
-        self, m: int, grid: GridSpec, *, fresh: bool, n: int | None = None, skip: int = 0
+        self,
+        m: int,
+        grid: GridSpec,
+        *,
+        fresh: bool,
+        n: int | None = None,
+        skip: int = 0,
+        stall_loss: float | None = None,
     ) -> float:
         """Link seconds an m x n run (n unknown: Bob's size taken as Alice's) will need from
-        now, its first ``skip`` messages already exchanged."""
+        now, its first ``skip`` messages already exchanged (``stall_loss``: see
+        :func:`~companion.failsafe.run_seconds`)."""
         if self.settings.suite is not Suite.COMPACT:
             return 0.0
         sizes = message_sizes(
@@ -674,6 +682,7 @@ class CompanionCore:
             loss=self.settings.failsafe.loss,
             duty=self.endpoint.duty,
             now=self.clock.now(),
+            stall_loss=stall_loss,
         )
 
     def _near(self, path: list[tuple[int, int]], horizon: int) -> list[tuple[int, int]]:

@@ -41,7 +41,11 @@ class Edits(CompanionCore):
         """While a run is under way: act as soon as its result could come too late.  Until
         Bob's first reply tells his size the estimate is that of the smallest Bob (Alice's
         own size would cry wolf when Bob's path is short: runs are sized m x n); then it is
-        the rest of the real m x n run from that moment; past it, as long as the overrun."""
+        the rest of the real m x n run from that moment; past it, as long as the overrun.
+        A wait for our duty-cycle budget counts when even a lossless run could not escape it,
+        or when it comes (a frame is queued for the budget): a run whose share fits the
+        budget only if few frames are lost is watched, not given up at once -- the margin
+        still leaves time to act when the wait comes."""
         deadline = self.clock.now() + needed
         self._running = (peer.node, deadline)
         sized = False
@@ -49,12 +53,12 @@ class Edits(CompanionCore):
             await self.clock.sleep(2.0)
             if not sized and alice.n is not None:
                 sized = True  # messages 1 and 2 (hello, offer) are behind us
-                rest = self._seconds(alice.m, grid, fresh=False, n=alice.n, skip=2)
+                rest = self._seconds(alice.m, grid, fresh=False, n=alice.n, skip=2, stall_loss=0.0)
                 deadline = self.clock.now() + rest
                 self._running = (peer.node, deadline)
             # Overdue (losses, a silent peer): the estimate has failed; expect as long again
             # as it has overrun, so the fail-safe does not wait for the last seconds.
-            left = max(abs(deadline - self.clock.now()), 2.0)
+            left = max(abs(deadline - self.clock.now()), 2.0) + self.endpoint.budget_wait()
             if too_late(left, self._urgency(peer), self.settings.failsafe):
                 await self._precaution(peer, left, self._urgency(peer))
                 return
@@ -100,10 +104,11 @@ class Edits(CompanionCore):
         speed = max(self.speed_m_s, self.settings.cruise_m_s)
         schedule = self._schedule(self.original, self.path, start, self.original_current)
         tolerance = self.settings.separation.tolerance
-        entered = [schedule.window(k, tolerance)[0] for k in range(start, start + len(path) - 1)]
+        windows = [schedule.window(k, tolerance) for k in range(start, start + len(path) - 1)]
         risky = at_risk(
             path, start, self._here(), speed, peer.position, self._peer_speed(peer), needed,
-            settings, self._decided(peer), peer_age_s=self._silent_for(peer), entered=entered,
+            settings, self._decided(peer), peer_age_s=peer.position_age(self.clock.now()),
+            entered=[w[0] for w in windows], left=[w[1] for w in windows],
         )  # fmt: skip
         if not risky:
             return

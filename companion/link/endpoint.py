@@ -179,6 +179,11 @@ class LinkEndpoint:
             or self.clock.now() - self._last_traffic < quiet_s
         )
 
+    def budget_wait(self) -> float:
+        """Seconds the next queued frame must still wait for the duty-cycle budget (0: none
+        waits, or nothing is queued)."""
+        return self.radio.budget_wait()
+
     def _session(self, peer: int, session: int) -> Session:
         try:
             return self._sessions[(peer, session)]

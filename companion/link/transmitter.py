@@ -69,6 +69,15 @@ class Transmitter:
         self._wake.set()
         return done
 
+    def budget_wait(self) -> float:
+        """Seconds the frame at the head of the queue must wait for the duty-cycle budget."""
+        queue = self._control if self._control else self._data
+        if not queue:
+            return 0.0
+        now = self.clock.now()
+        item = queue[0]
+        return max(self.duty.earliest(now, item.airtime, control=item.control) - now, 0.0)
+
     def fail_pending(self, error: LinkError) -> None:
         """The endpoint closes: a sender waiting on a queued frame gets ``error``."""
         for item in (*self._control, *self._data):

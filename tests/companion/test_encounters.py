@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import statistics
 import tempfile
 from pathlib import Path
 
@@ -142,6 +143,35 @@ def test_precaution_enters_our_segments_by_their_windows() -> None:
     assert at_risk(path, 0, here, 10.0, peer, 10.0, 20.0, settings, entered=[0, 5, 40]) == [1]
     # a long hold before segment 1: nothing at risk
     assert at_risk(path, 0, here, 10.0, peer, 10.0, 20.0, settings, entered=[0, 50, 90]) == []
+    # the peer can come within reach of segments 1 and 2 (250 m) in 25 s: a segment we have
+    # left by then is not at risk
+    entered = [0.0, 5.0, 25.0]
+    assert at_risk(
+        path, 0, here, 10.0, peer, 10.0, 20.0, settings, entered=entered, left=[5, 30, 60]
+    ) == [1, 2]
+    assert at_risk(
+        path, 0, here, 10.0, peer, 10.0, 20.0, settings, entered=entered, left=[5, 24, 60]
+    ) == [2]
+    # ... heard 2 s ago: it may have flown 20 m of it already
+    assert at_risk(
+        path, 0, here, 10.0, peer, 10.0, 20.0, settings, entered=entered, left=[5, 24, 60],
+        peer_age_s=2.0,
+    ) == [1, 2]  # fmt: skip
+
+
+def test_speed_is_measured_between_the_beacons_positions_not_their_arrivals() -> None:
+    """A beacon queued behind a run's burst is heard late: its position's own time stamp
+    measures the speed (10 m/s), not the 4 s between arrivals (which would say 35 m/s)."""
+    peer = Peer(2, beacon(north(1000)), heard_at=0.0)
+    peer.heard(beacon(north(1000)), 10.0, north(0), made_at=0.0)  # made at 0, heard at 10
+    peer.heard(beacon(north(860)), 14.0, north(0), made_at=14.0)
+    assert peer.speed_m_s == pytest.approx(10.0, rel=0.01)
+    assert peer.range_rate == pytest.approx(-10.0, rel=0.01)
+    assert peer.position_age(20.0) == pytest.approx(6.0)
+    late = Peer(3, beacon(north(1000)), heard_at=0.0)
+    late.heard(beacon(north(1000)), 10.0, north(0), made_at=0.0)
+    late.heard(beacon(north(960)), 20.0, north(0), made_at=11.0)  # queued 9 s
+    assert late.position_age(20.0) == pytest.approx(9.0)
 
 
 def test_time_to_meet_worst_case_then_measured() -> None:
@@ -230,7 +260,10 @@ def test_box_radius_doubles_until_the_path_fits() -> None:
 
 
 def test_estimate_matches_the_simulated_radio() -> None:
-    """The fail-safe's estimate of a run against the link's own accounting (virtual time)."""
+    """The fail-safe's estimate of a run against the link's own accounting (virtual time):
+    within 20 % of the median of nine runs at 10 % loss (measured: 12.05 s against medians
+    of 12.0 and 12.3 s, single runs 9.7-20.9 s); without the loss model's ACK round trips
+    and retransmission timers it said 9.5 s."""
     grid = GridSpec(GridKind.PLANE, 2000)
     case = Case.of(((0, 0), (500, 20), (900, -40)), ((400, -300), (420, 300), (800, 600)), grid)
     party = Party.generate(Suite.COMPACT)
@@ -239,10 +272,11 @@ def test_estimate_matches_the_simulated_radio() -> None:
             link_case(case, party, PROFILES[profile], Impairments(loss=0.1), seed)[
                 "wall_s_simulated"
             ]
-            for seed in range(1, 6)
+            for seed in range(1, 10)
         ]
         estimate = run_seconds(message_sizes(2, 2, grid), PROFILES[profile], loss=0.1)
-        assert min(measured) * 0.5 < estimate < max(measured) * 1.5, (estimate, measured)
+        median = statistics.median(measured)
+        assert 0.8 * median < estimate < 1.2 * median, (estimate, measured)
 
 
 def test_estimate_counts_the_duty_cycle() -> None:
@@ -256,6 +290,13 @@ def test_estimate_counts_the_duty_cycle() -> None:
     assert quick < 60 and slow > 3000  # the budget returns only as the hour rolls on
     settings = FailsafeSettings()
     assert too_late(slow, 600.0, settings) and not too_late(quick, 600.0, settings)
+    # A share that fits only if few frames are lost: a wait that may not come (the watch
+    # of a run under way counts it when it comes), one that must.
+    edge = DutyCycle(profile.budget_s, profile.duty_window_s, 0.1)
+    edge.record(0.0, 32.4 - 9.0)  # 9 s left: 5000 B need 8.5 s lossless, 9.4 s at 10 % loss
+    assert run_seconds(sizes, profile, loss=0.1, duty=edge, now=10.0) > 3000
+    assert run_seconds(sizes, profile, loss=0.1, duty=edge, now=10.0, stall_loss=0.0) < 60
+    assert run_seconds(sizes, profile, loss=0.1, duty=spent, now=10.0, stall_loss=0.0) > 3000
 
 
 def test_radio_turns_by_priority() -> None:

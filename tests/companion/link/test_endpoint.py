@@ -85,6 +85,26 @@ def test_the_duty_cycle_budget_is_never_exceeded(name: str) -> None:
     assert run_simulated(main()) > 3600.0  # ... so it waited, in virtual time
 
 
+def test_the_endpoint_tells_how_long_a_queued_frame_waits_for_the_budget() -> None:
+    """What the fail-safe's watch reads while a run is under way: nothing before the budget
+    runs out, then the wait until the hour's first transmissions leave the window."""
+
+    async def main() -> list[float]:
+        async with pair(PROFILES["eu868-sf7"], seed=5) as p:
+            waits = [p.a.budget_wait()]
+            session = p.a.open(2)
+            sending = asyncio.create_task(p.a.send(2, session, os.urandom(30_000)))
+            while max(waits) == 0.0 and not sending.done():
+                await p.a.clock.sleep(1.0)
+                waits.append(p.a.budget_wait())
+            sending.cancel()
+            return waits
+
+    waits = run_simulated(main())
+    assert waits[0] == 0.0 and 3000.0 < waits[-1] < 3600.0
+    assert 30.0 < len(waits) < 60.0  # the 32.4 s of data airtime an hour allows, sent first
+
+
 def test_us915_frames_respect_the_dwell_time() -> None:
     async def main() -> None:
         async with pair(PROFILES["us915-sf9"]) as p:

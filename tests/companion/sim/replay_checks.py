@@ -34,7 +34,9 @@ def check(report: Report, climbers: set[int], *, precautions: int = 0) -> None:
             assert not drone["raises"] and drone["edit"] != "failed"
         for event in drone["timeline"]:
             assert event["t_s"] >= 0
-    assert report["false_alarms"] == 0 and report["made_worse"] == 0
+    # (a precaution allowed for a pair that turns out clear is that pair's false alarm)
+    allowed = report["precautionary_actions"] if precautions else 0
+    assert report["false_alarms"] <= allowed and report["made_worse"] == 0
     assert report["precautionary_actions"] <= precautions, [
         (d["id"], d["precautionary"], d["runs"]) for d in report["drones"] if d["precautionary"]
     ]
@@ -65,17 +67,20 @@ def check_in_flight(report: Report, climbing: int, conflicts: int, *, precaution
             assert {"run_started", "result", "uploaded"} <= set(kinds)
 
 
-def check_separation(report: Report, name: str, climbers: set[int], conflicts: int) -> None:
+def check_separation(
+    report: Report, name: str, climbers: set[int], conflicts: int, *, precautions: int = 0
+) -> None:
     """Separation in space and time decides (scripts/make_separation_scenarios.py): near
     misses whose tracks never cross are conflicts and resolved at least the offset apart;
     a drone 5 m higher is climbed over clear of its altitude, never into it; a crossing 60 m
     apart in altitude, or minutes apart in time, is none -- no edit, no precaution; a first
     leg is flown at the offset from its start; a drone held up compares again."""
-    check(report, climbers)
+    check(report, climbers, precautions=precautions)
     assert report["conflicts"] == conflicts
     drones = {d["id"]: d for d in report["drones"]}
     if not conflicts:  # the runs found nothing: nobody flew differently
-        assert all(not d["flagged_segments"] and not d["raises"] for d in drones.values())
+        assert all(not d["flagged_segments"] for d in drones.values())
+        assert sum(bool(d["raises"]) for d in drones.values()) <= precautions
         assert all(p["closest_approach_m"] >= 15.0 for p in report["pairs"])
     if name in ("sep_parallel", "sep_tee", "sep_graze"):
         assert not report["pairs"][0]["paths_cross"]  # a near miss, not a crossing

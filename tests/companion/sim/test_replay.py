@@ -75,8 +75,7 @@ def test_in_flight_edits_over_mavsdk(name: str, climbing: int) -> None:
     minute of flight, and the first result comes too late for the first leg."""
     report = asyncio.run(run_replay(scenario(name, time_scale=10.0))).report.to_json()
     assert not report["virtual_time"] and report["drones"][0]["vehicle"] == "mock"
-    # (the in-flight crossing may take one precaution: test_virtual_replay.py says why)
-    check_in_flight(report, climbing, 1, precautions=int(name == "inflight_crossing"))
+    check_in_flight(report, climbing, 1, precautions=0)
     if name == "sep_first_leg":
         check_separation(report, name, {1}, 1)
         assert report["drones"][0]["vehicle_holds"] == "edited"

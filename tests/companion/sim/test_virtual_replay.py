@@ -58,18 +58,12 @@ def test_scenario(name: str, climbers: set[int], conflicts: int) -> None:
 @pytest.mark.parametrize(
     ("name", "climbing", "conflicts", "precautions"),
     [
-        # The full run after the near run takes 31-35 s where the fail-safe's airtime model
-        # says 12 s (ACK round trips and retransmission timers under 10 % loss are not in
-        # it): in about one run in four its watch then finds the result may come a second
-        # too late for the first leg and climbs one precaution before it (the result then
-        # agrees) -- the issue-26 target of none is not met here yet (docs/companion.md)
-        ("inflight_crossing", 1, 1, 1),
+        ("inflight_crossing", 1, 1, 0),
         ("inflight_headon", 1, 1, 0),
         # EU868's 1 % duty cycle: the first contact's two runs take about 31 of the 32.4 s
-        # of data airtime an hour allows a drone; the fail-safe's estimate of the second
-        # (10 % loss allowed for) may overshoot it by a second and climb as a precaution
-        # (docs/benchmarks.md, the replays' table): at most that one
-        ("inflight_eu868", 1, 1, 1),
+        # of data airtime an hour allows a drone -- they fit when few frames are lost, and
+        # the watch waits for a budget wait until it comes (docs/companion.md)
+        ("inflight_eu868", 1, 1, 0),
         ("inflight_long", 1, 1, 0),
         ("inflight_star", 2, 3, 0),
     ],
@@ -93,7 +87,11 @@ def test_in_flight_scenario(name: str, climbing: int, conflicts: int, precaution
     ],
 )
 def test_separation_scenario(name: str, climbers: set[int], conflicts: int) -> None:
-    check_separation(_virtual(name), name, climbers, conflicts)
+    # Six drones on one channel: a peer's beacons can go unheard for over a minute (runs
+    # back to back, collisions); the fail-safe then takes it to fly straight at us since,
+    # and about one run in eight one drone climbs one precaution (a busy sky: issue 29)
+    precautions = int(name == "sep_six")
+    check_separation(_virtual(name), name, climbers, conflicts, precautions=precautions)
 
 
 def test_intruder_scenario() -> None:
