@@ -105,9 +105,13 @@ class Edits(CompanionCore):
         schedule = self._schedule(self.original, self.path, start, self.original_current)
         tolerance = self.settings.separation.tolerance
         windows = [schedule.window(k, tolerance) for k in range(start, start + len(path) - 1)]
+        # A segment a run found in conflict with this peer and that we fly raised for it
+        # (verified upload) needs no precaution while it is compared again (the peer or we
+        # were retimed: the comparison restarts, the raise stands until its result).
+        decided = self._decided(peer) | {k for k in peer.conflicts if self.raises.get(k)}
         risky = at_risk(
             path, start, self._here(), speed, peer.position, self._peer_speed(peer), needed,
-            settings, self._decided(peer), peer_age_s=peer.position_age(self.clock.now()),
+            settings, decided, peer_age_s=peer.position_age(self.clock.now()),
             entered=[w[0] for w in windows], left=[w[1] for w in windows],
         )  # fmt: skip
         if not risky:

@@ -60,7 +60,12 @@ def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
         "runs (key exchange, tags) and to the beacons (beyond unauthenticated 24-byte beacons: "
         "tags, signed and certificate beacons), and their share of the rest of the radio bytes.  "
         "Against deviating peers: the bytes of the OT consistency checks (or the paper suite's "
-        "key proofs) in the answers, and their share of the rest.",
+        "key proofs) in the answers, and their share of the rest.  These run in real time at "
+        "each scenario's time scale (12-50x; MAVSDK and the mock autopilots over UDP): a "
+        "protocol step's CPU then passes as that many times its seconds of flight -- a "
+        "companion computer 12-50 times slower than this machine -- so runs end later than in "
+        "virtual time (`--virtual`, what the tests fly: CPU counted 1:1), and a precaution "
+        "the virtual replays never need can appear here.",
         "",
         "| scenario | link | conflicts resolved | precautionary | radio bytes | authentication "
         "| against deviating peers | airtime | first result | closest without -> with |",

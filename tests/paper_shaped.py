@@ -57,7 +57,7 @@ def _point(rng: random.Random, r: int) -> Point:
 
 
 def _pairs(rng: random.Random) -> list[tuple[tuple[Point, ...], tuple[Point, ...]]]:
-    pairs = [
+    pairs: list[tuple[tuple[Point, ...], tuple[Point, ...]]] = [
         ((_point(rng, 99), _point(rng, 99)), (_point(rng, 99), _point(rng, 99))) for _ in range(30)
     ]
     a, b = (-40, -20), (60, 30)  # on the line y = (x + 40) / 2

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import shutil
 import socket
 import subprocess
@@ -49,7 +50,9 @@ def files(tmp_path: Path) -> Path:
     scenario = scenario.replace("inspection_north.plan", "other.plan")
     scenario = scenario.replace("delivery_east.plan", "good.plan")
     (tmp_path / "typo.toml").write_text(scenario.replace("takeoff_delay_s", "takeof_delay_s"))
-    (tmp_path / "scale.toml").write_text(scenario.replace("time_scale = 40", "time_scale = 0"))
+    zero_scale, count = re.subn(r"(?m)^time_scale = .*$", "time_scale = 0", scenario)
+    assert count == 1
+    (tmp_path / "scale.toml").write_text(zero_scale)
     (tmp_path / "nanmission.toml").write_text(scenario.replace("good.plan", "nan.plan"))
     (tmp_path / "good.toml").write_text(scenario)
     (tmp_path / "config.toml").write_text("nod = 1\n")

@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Protocol
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
@@ -168,6 +169,14 @@ async def test_fence_and_rally_types_are_kept_apart() -> None:
         client.close()
 
 
+class _Build(Protocol):
+    """Makes one message with the client's ``MAVLink``: ``build(mav)``.  (A protocol rather
+    than a ``Callable``: mypy cannot infer a lambda with a default argument, such as
+    ``lambda m, it=it: ...``, against a ``Callable``.)"""
+
+    def __call__(self, mav: mavlink.MAVLink, /) -> object: ...
+
+
 class _Client(asyncio.DatagramProtocol):
     """A bare pymavlink ground station, for what MAVSDK's mission_raw does not drive."""
 
@@ -190,7 +199,7 @@ class _Client(asyncio.DatagramProtocol):
         for message in self.mav.parse_buffer(data) or []:
             self.inbox.put_nowait(message)
 
-    def send(self, build: Callable[[mavlink.MAVLink], object]) -> None:
+    def send(self, build: _Build) -> None:
         message = build(self.mav)
         assert self.transport is not None
         self.transport.sendto(message.pack(self.mav), ("127.0.0.1", self.mock.bind_port))  # type: ignore[attr-defined]

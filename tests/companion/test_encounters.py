@@ -362,6 +362,33 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
     assert companion.raises.get(1, 0) >= 10.0 and autopilot.uploads  # climbed clear of it
 
 
+def test_guard_leaves_a_leg_already_raised_for_the_peer() -> None:
+    """The same busy radio, but a run already found the crossing leg in conflict with peer 2
+    and the drone flies it raised (a retime made them compare again): no precaution climbs
+    it again -- the raise stands until the new result."""
+    items, _ = read_plan(SCENARIOS / "inflight_east.plan")
+
+    async def main() -> Companion:
+        clock = Clock()
+        c, _ = alone(items, clock)
+        c.path = flight_path(items, None)
+        c.relative_alt, c.current_item, c.speed_m_s = 30.0, 2, 10.0
+        (lat, west), (_, east_) = c.path.points[:2]
+        c.position = (lat, (west + east_) // 2, 518.0)
+        south = (C_LAT - round(800 / M_PER_E7_LAT), C_LON)
+        c.peers[2] = Peer(2, beacon(south), heard_at=clock.now(), conflicts={1})
+        c.raises = {1: 15.0}
+        c._running = (3, clock.now() + 100.0)
+        guard = asyncio.create_task(c._guard())
+        await clock.sleep(5.0)
+        guard.cancel()
+        return c
+
+    companion = run_simulated(main())
+    actions = [e for e in companion.events if e.kind == "precautionary"]
+    assert all(1 not in e.detail["segments"] for e in actions)
+
+
 def test_edit_is_built_on_the_held_mission_and_keeps_the_current_item() -> None:
     """In flight on item 2, an edit keeps item 2 current (PX4 restarts a mission at the item
     an upload marks current) and is built on what the vehicle holds (PX4 reads frame 3 back

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from protocol.geometry import Point
 from protocol.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob, Limits, State
 from protocol.tools.loopback import Transcript, run_paths
+from protocol.volumes import Route
 from protocol.wire import Suite
 
 GRID = GridSpec(GridKind.PLANE, 99)
@@ -43,8 +45,8 @@ def machines(
 
 
 def run(
-    alice_path: tuple[Point, ...],
-    bob_path: tuple[Point, ...],
+    alice_path: Sequence[Point] | Route,
+    bob_path: Sequence[Point] | Route,
     suite: Suite,
     keys: Any,
     ot_pair: Any,

@@ -9,10 +9,12 @@ from protocol.dgk import DGKPrivateKey, DGKPublicKey, u_for_bits
 from protocol.encoding import int_to_fixed
 from protocol.errors import InsecureParametersError, LocalProtocolError, RemoteProtocolError
 
+from ..conftest import Keys
+
 SMALL = st.integers(min_value=-1000, max_value=1000)
 
 
-def test_key_structure_follows_the_2009_correction(keys):
+def test_key_structure_follows_the_2009_correction(keys: Keys) -> None:
     sk = keys.dgk
     u = sk.public_key.u
     assert sk.public_key.n.bit_length() == 2048 and sk.public_key.t == 224
@@ -26,14 +28,14 @@ def test_key_structure_follows_the_2009_correction(keys):
     assert gmpy2.powmod(h, sk.vp * sk.vq, n) == 1 and gmpy2.powmod(h, sk.vp, n) != 1
 
 
-def test_u_follows_comparison_bits():
+def test_u_follows_comparison_bits() -> None:
     assert u_for_bits(42) == 131
     assert gmpy2.is_prime(u_for_bits(64)) and u_for_bits(64) > 3 * 64 + 3
 
 
 @settings(max_examples=30, deadline=None)
 @given(a=SMALL, b=SMALL, k=SMALL)
-def test_homomorphic_identities(keys, a, b, k):
+def test_homomorphic_identities(keys: Keys, a: int, b: int, k: int) -> None:
     pub, sk = keys.dgk_pub, keys.dgk
     u = pub.u
     ca, cb = pub.encrypt(a), pub.encrypt(b)
@@ -47,7 +49,7 @@ def test_homomorphic_identities(keys, a, b, k):
     assert sk.decrypt(pub.rerandomize(ca)) == a % u
 
 
-def test_key_holder_batch_is_fresh_and_decodes(keys):
+def test_key_holder_batch_is_fresh_and_decodes(keys: Keys) -> None:
     data = keys.dgk.encrypt_batch([0, 1, 1, 0])
     assert len(data) == 4 * 256
     from protocol.encoding import Reader
@@ -56,14 +58,14 @@ def test_key_holder_batch_is_fresh_and_decodes(keys):
     assert [keys.dgk.decrypt(c) for c in cts] == [0, 1, 1, 0]
 
 
-def test_public_key_round_trip(keys):
+def test_public_key_round_trip(keys: Keys) -> None:
     data = keys.dgk.public_key.to_bytes()
     assert DGKPublicKey.from_bytes(data) == keys.dgk.public_key
     assert len(data) == 3 * 256 + 4
 
 
 @pytest.mark.parametrize("case", ["zero", "n", "factor", "short"])
-def test_malformed_ciphertexts_are_rejected(keys, case):
+def test_malformed_ciphertexts_are_rejected(keys: Keys, case: str) -> None:
     pub = keys.dgk_pub
     data = {
         "zero": bytes(256),
@@ -76,7 +78,7 @@ def test_malformed_ciphertexts_are_rejected(keys, case):
 
 
 @pytest.mark.parametrize("case", ["u_not_prime", "u_huge", "g_zero", "t_small", "truncated"])
-def test_bad_public_keys_are_rejected(keys, case):
+def test_bad_public_keys_are_rejected(keys: Keys, case: str) -> None:
     data = bytearray(keys.dgk.public_key.to_bytes())
     if case == "u_not_prime":
         data[-4:-2] = (133).to_bytes(2, "big")
@@ -95,7 +97,7 @@ def test_bad_public_keys_are_rejected(keys, case):
         DGKPublicKey.from_bytes(bytes(data))
 
 
-def test_weak_parameters_are_refused():
+def test_weak_parameters_are_refused() -> None:
     with pytest.raises(InsecureParametersError):
         DGKPrivateKey.generate(t=160)
     with pytest.raises(InsecureParametersError):
@@ -104,6 +106,6 @@ def test_weak_parameters_are_refused():
     assert sk.decrypt(sk.public_key.encrypt(7)) == 7
 
 
-def test_unfresh_ciphertext_cannot_be_sent(keys):
+def test_unfresh_ciphertext_cannot_be_sent(keys: Keys) -> None:
     with pytest.raises(LocalProtocolError):
         (keys.dgk_pub.encrypt(1) + 1).to_bytes()

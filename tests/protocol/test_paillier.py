@@ -1,5 +1,8 @@
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import gmpy2
 import pytest
 from hypothesis import given, settings
@@ -9,11 +12,13 @@ from protocol.encoding import int_to_fixed
 from protocol.errors import InsecureParametersError, LocalProtocolError, RemoteProtocolError
 from protocol.paillier import PaillierPrivateKey, PaillierPublicKey
 
+from ..conftest import Keys
+
 BIG = st.integers(min_value=-(2**600), max_value=2**600)
 SMALL = st.integers(min_value=-(2**64), max_value=2**64)
 
 
-def test_key_sizes(keys):
+def test_key_sizes(keys: Keys) -> None:
     assert keys.paillier.public_key.n.bit_length() == 2048
     assert len(keys.paillier_pub.to_bytes()) == 256
     assert keys.paillier_pub.ciphertext_width == 512
@@ -21,7 +26,7 @@ def test_key_sizes(keys):
 
 @settings(max_examples=40, deadline=None)
 @given(a=BIG, b=BIG, k=SMALL)
-def test_homomorphic_identities(keys, a, b, k):
+def test_homomorphic_identities(keys: Keys, a: int, b: int, k: int) -> None:
     pub, sk = keys.paillier_pub, keys.paillier
     ca, cb = pub.encrypt(a), pub.encrypt(b)
     assert sk.decrypt_signed(ca) == a
@@ -36,13 +41,13 @@ def test_homomorphic_identities(keys, a, b, k):
     assert sk.decrypt_signed(rerandomized) == a + b
 
 
-def test_key_holder_encryption_is_crt_noise_and_decrypts(keys):
+def test_key_holder_encryption_is_crt_noise_and_decrypts(keys: Keys) -> None:
     sk = keys.paillier
     c = sk.public_key.encrypt(12345)
     assert keys.paillier.decrypt(keys.paillier_pub.ciphertext_from_bytes(c.to_bytes())) == 12345
 
 
-def test_noise_pool_is_used_once_per_value(keys):
+def test_noise_pool_is_used_once_per_value(keys: Keys) -> None:
     pub = PaillierPublicKey.from_bytes(keys.paillier_pub.to_bytes())
     pub.noise_pool.fill(3)
     assert len(pub.noise_pool) == 3
@@ -50,7 +55,7 @@ def test_noise_pool_is_used_once_per_value(keys):
     assert len(values) == 4 and len(pub.noise_pool) == 0
 
 
-def test_fresh_flag_guards_the_wire(keys):
+def test_fresh_flag_guards_the_wire(keys: Keys) -> None:
     c = keys.paillier_pub.encrypt(5)
     c.to_bytes()
     with pytest.raises(LocalProtocolError):
@@ -60,7 +65,7 @@ def test_fresh_flag_guards_the_wire(keys):
     assert len((c + 1).rerandomize().to_bytes()) == 512
 
 
-def test_serialisation_round_trip(keys):
+def test_serialisation_round_trip(keys: Keys) -> None:
     c = keys.paillier_pub.encrypt(-77)
     back = keys.paillier_pub.ciphertext_from_bytes(c.to_bytes())
     assert back.value == c.value and keys.paillier.decrypt_signed(back) == -77
@@ -70,7 +75,7 @@ def test_serialisation_round_trip(keys):
     "value",
     ["zero", "nsquare", "above", "multiple_of_p", "short", "long"],
 )
-def test_malformed_ciphertexts_are_rejected(keys, value):
+def test_malformed_ciphertexts_are_rejected(keys: Keys, value: str) -> None:
     pub = keys.paillier_pub
     width = pub.ciphertext_width
     data = {
@@ -90,13 +95,15 @@ def test_malformed_ciphertexts_are_rejected(keys, value):
     [lambda sk: sk.public_key.n + 1, lambda sk: sk.p, lambda sk: sk.p * sk.p],
     ids=["even", "prime", "square"],
 )
-def test_bad_public_keys_are_rejected(keys, modulus):
+def test_bad_public_keys_are_rejected(
+    keys: Keys, modulus: Callable[[PaillierPrivateKey], int]
+) -> None:
     n = int(modulus(keys.paillier))
     with pytest.raises(RemoteProtocolError):
         PaillierPublicKey.from_bytes(n.to_bytes((n.bit_length() + 7) // 8, "big"))
 
 
-def test_short_modulus_is_refused_unless_test_only(keys):
+def test_short_modulus_is_refused_unless_test_only(keys: Keys) -> None:
     small = PaillierPrivateKey.generate(512, insecure_for_tests=True)
     with pytest.raises(InsecureParametersError):
         PaillierPublicKey(small.public_key.n)
@@ -106,7 +113,7 @@ def test_short_modulus_is_refused_unless_test_only(keys):
         PaillierPublicKey.from_bytes(small.public_key.to_bytes())
 
 
-def test_ciphertexts_under_different_keys_do_not_mix(keys):
+def test_ciphertexts_under_different_keys_do_not_mix(keys: Keys) -> None:
     other = PaillierPrivateKey.generate(512, insecure_for_tests=True)
     with pytest.raises(LocalProtocolError):
         keys.paillier_pub.encrypt(1) + other.public_key.encrypt(1)
@@ -114,7 +121,7 @@ def test_ciphertexts_under_different_keys_do_not_mix(keys):
         keys.paillier.decrypt(other.public_key.encrypt(1))
 
 
-def test_generated_primes_are_prime_and_balanced():
+def test_generated_primes_are_prime_and_balanced() -> None:
     sk = PaillierPrivateKey.generate(1024, insecure_for_tests=True)
     assert gmpy2.is_prime(sk.p) and gmpy2.is_prime(sk.q)
     assert sk.p.bit_length() == sk.q.bit_length() == 512
@@ -122,7 +129,7 @@ def test_generated_primes_are_prime_and_balanced():
 
 
 @pytest.fixture(scope="module")
-def phe_pair():
+def phe_pair() -> Any:
     """python-paillier (phe, GPLv3) as an independent oracle; imported by tests only."""
     from phe import paillier as phe_paillier
 
@@ -130,13 +137,13 @@ def phe_pair():
 
 
 class TestInteropWithPhe:
-    def test_ours_decrypts_with_phe(self, phe_pair):
+    def test_ours_decrypts_with_phe(self, phe_pair: tuple[Any, Any]) -> None:
         phe_pub, phe_priv = phe_pair
         ours = PaillierPublicKey(phe_pub.n)
         for m in (0, 1, 123456789, 2**200):
             assert phe_priv.raw_decrypt(int(ours.encrypt(m).value)) == m
 
-    def test_phe_decrypts_with_ours(self, phe_pair):
+    def test_phe_decrypts_with_ours(self, phe_pair: tuple[Any, Any]) -> None:
         phe_pub, phe_priv = phe_pair
         ours = PaillierPrivateKey(phe_priv.p, phe_priv.q)
         for m in (0, 1, 987654321, 2**300):
@@ -146,7 +153,7 @@ class TestInteropWithPhe:
             assert ours.decrypt(c) == m
 
 
-def test_key_holder_noise_is_an_nth_residue(keys):
+def test_key_holder_noise_is_an_nth_residue(keys: Keys) -> None:
     """CRT noise must lie in the subgroup of n-th residues: x^lambda = 1 (mod n^2)."""
     sk = keys.paillier
     lam = (sk.p - 1) * (sk.q - 1) // gmpy2.gcd(sk.p - 1, sk.q - 1)

@@ -11,12 +11,12 @@ be caught by the same tests, so the tests can fail.
 
 from __future__ import annotations
 
+import secrets
 from collections import Counter
 from typing import Any
 
 import pytest
 
-import protocol.millionaire as millionaire_module
 import protocol.products as products_module
 from protocol.bitpack import unpack_bits
 from protocol.grid import GridKind, GridSpec
@@ -74,12 +74,12 @@ def alice_view(bob_path: Any, ot_pair: Any, *, honest: bool = True) -> list[list
         assert not honest or alice.hits == [bob_path is BOB_PATH]
         offer = received[0][HEADER_SIZE + 2 + NONCE_SIZE + SEPARATION_SIZE :]  # after n, Bob's
         # nonce and his separation minima (public)
-        flips = offer[-alice._impl.plan.products.correction_size() :]  # type: ignore[attr-defined]
+        flips = offer[-alice._impl.plan.products.correction_size() :]
         digits = received[1][HEADER_SIZE:]
         run_bits = unpack_bits(offer[:40], 320)  # OT extension
         for part in (flips, digits):  # choice corrections (whole bytes)
             run_bits += unpack_bits(part[:-1], 8 * len(part) - 8)
-        gmw: Any = alice._impl.gmw  # type: ignore[attr-defined]
+        gmw: Any = alice._impl.gmw
         for level in sorted(gmw._peer):
             run_bits += gmw._peer[level]
         views.append(run_bits)
@@ -119,7 +119,7 @@ def test_alices_view_does_not_depend_on_bobs_path(ot_pair: Any) -> None:
 @pytest.mark.slow
 def test_negative_control_unmasked_leaves_are_caught(ot_pair: Any, monkeypatch: Any) -> None:
     """Without Alice's random leaf shares, Bob's table entries are the comparison bits."""
-    monkeypatch.setattr(millionaire_module.secrets, "randbits", lambda k: 0)
+    monkeypatch.setattr(secrets, "randbits", lambda k: 0)
     _, bits1 = bob_view(CROSSING, ot_pair)
     _, bits2 = bob_view(FAR, ot_pair)
     assert indistinguishable(bits1, bits2) != []

@@ -10,18 +10,22 @@ so these tests can fail.
 from __future__ import annotations
 
 import math
+import secrets
 from collections import Counter
+from typing import cast
 
 import pytest
 
-import protocol.comparison as comparison_module
 from protocol.comparison import (
     ComparisonAlice,
     ComparisonBob,
+    PackedValues,
     pack_differences,
     slot_bits,
     slots_per_ciphertext,
 )
+
+from ..conftest import Keys
 
 L, KAPPA = 16, 40
 Z_CRIT = 4.5  # one-sided normal quantile, about 3e-6
@@ -55,13 +59,15 @@ def chi2_rejects(a: Counter[int], b: Counter[int]) -> bool:
             expected = total * n / (na + nb)
             stat += (count - expected) ** 2 / expected
     df = len(cats) - 1
-    z = ((stat / df) ** (1 / 3) - (1 - 2 / (9 * df))) / math.sqrt(2 / (9 * df))
+    z: float = ((stat / df) ** (1 / 3) - (1 - 2 / (9 * df))) / math.sqrt(2 / (9 * df))
     return z > Z_CRIT
 
 
-def bob_view(keys, diff: int, count: int) -> dict[str, list[float] | Counter[int]]:
+def bob_view(keys: Keys, diff: int, count: int) -> dict[str, list[float] | Counter[int]]:
     """Run ``count`` comparisons of x - y = diff and record everything Bob can compute."""
     pub = keys.paillier_pub
+    packed: list[PackedValues] | int  # reused below for each decrypted packed value
+    slots: list[int] | int  # reused below for the slot count of each ciphertext
     packed = pack_differences(pub, [pub.encrypt(diff)] * count, L, KAPPA)
     alice = ComparisonAlice(pub, keys.dgk_pub, L, KAPPA, packed, [[0]] * count)
     slots = [len(p.constants) for p in packed]
@@ -96,19 +102,21 @@ def bob_view(keys, diff: int, count: int) -> dict[str, list[float] | Counter[int
     return view
 
 
-def distinguishable(v1, v2) -> list[str]:
+def distinguishable(
+    v1: dict[str, list[float] | Counter[int]], v2: dict[str, list[float] | Counter[int]]
+) -> list[str]:
     failed = []
     for name in v1:
         if isinstance(v1[name], list):
-            if ks_rejects(v1[name], v2[name]):
+            if ks_rejects(cast(list[float], v1[name]), cast(list[float], v2[name])):
                 failed.append(name)
-        elif chi2_rejects(v1[name], v2[name]):
+        elif chi2_rejects(cast(Counter[int], v1[name]), cast(Counter[int], v2[name])):
             failed.append(name)
     return failed
 
 
 @pytest.mark.slow
-def test_views_for_same_result_are_indistinguishable(keys):
+def test_views_for_same_result_are_indistinguishable(keys: Keys) -> None:
     count = 200
     small = bob_view(keys, 1, count)  # x - y = 1: x >= y
     large = bob_view(keys, 2**L - 1, count)  # x - y = 2^16 - 1: x >= y
@@ -119,14 +127,16 @@ def test_views_for_same_result_are_indistinguishable(keys):
 
 
 @pytest.mark.slow
-def test_negative_control_without_mask_is_caught(keys, monkeypatch):
+def test_negative_control_without_mask_is_caught(
+    keys: Keys, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """With Alice's additive mask r_j removed, Bob's decrypted d_j reveal the input."""
-    real = comparison_module.secrets.randbits
+    real = secrets.randbits
 
     def weak_randbits(k: int) -> int:
         return real(2) if k == L + KAPPA + 1 else real(k)
 
-    monkeypatch.setattr(comparison_module.secrets, "randbits", weak_randbits)
+    monkeypatch.setattr(secrets, "randbits", weak_randbits)
     small = bob_view(keys, 1, 150)
     large = bob_view(keys, 2**L - 1, 150)
     assert "d" in distinguishable(small, large)

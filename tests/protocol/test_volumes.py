@@ -6,7 +6,7 @@ collinear gaps, tees stopping short, zero-length segments, touching windows and 
 from __future__ import annotations
 
 from fractions import Fraction
-from typing import Any
+from typing import Any, cast
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -24,6 +24,7 @@ from protocol.pathcircuit import Capsules, Orient, Proj, Range, volume_hits
 from protocol.tools.loopback import run_paths
 from protocol.volumes import (
     NO_SEPARATION,
+    Interval,
     Route,
     Separation,
     VolumeSpec,
@@ -304,7 +305,12 @@ def routes(max_segments: int, bound: int) -> st.SearchStrategy[Route]:
         )
         bands = draw(st.none() | st.lists(interval, min_size=count, max_size=count))
         windows = draw(st.none() | st.lists(interval, min_size=count, max_size=count))
-        return Route(tuple(pts), bands and tuple(bands), windows and tuple(windows))
+        # the lists are never empty (count >= 1): ``x and tuple(x)`` is a tuple or None
+        return Route(
+            tuple(pts),
+            cast(tuple[Interval, ...] | None, bands and tuple(bands)),
+            cast(tuple[Interval, ...] | None, windows and tuple(windows)),
+        )
 
     return build()
 

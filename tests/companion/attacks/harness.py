@@ -27,7 +27,7 @@ from companion.runtime import Companion, CompanionSettings, Credentials
 from companion.sim.fleet import make_fleet
 from protocol.geometry import Point
 from protocol.grid import GridSpec
-from protocol.intersection import Alice
+from protocol.intersection import Alice, Bob
 from protocol.wire import Suite
 
 SCENARIOS = Path(__file__).resolve().parents[3] / "sitl_configs" / "scenarios"
@@ -124,7 +124,7 @@ class World:
     async def attacker(self, node: int) -> LinkEndpoint:
         """A radio of the attacker's on the same channel (any node id it likes)."""
         tap = Tap(self.medium.attach(node), self.sniffer, self.clock)
-        endpoint = LinkEndpoint(node, tap, PROFILE, clock=self.clock)  # type: ignore[arg-type]
+        endpoint = LinkEndpoint(node, tap, PROFILE, clock=self.clock)
         await endpoint.start()
         return endpoint
 
@@ -196,7 +196,7 @@ async def world(
         items, home = read_plan(SCENARIOS / plan)
         assert home is not None
         tap = Tap(medium.attach(node), sniffer, clock)
-        endpoint = LinkEndpoint(node, tap, PROFILES[profile], clock=clock)  # type: ignore[arg-type]
+        endpoint = LinkEndpoint(node, tap, PROFILES[profile], clock=clock)
         autopilot = FakeAutopilot(items)
         c = Companion(
             CompanionSettings(node=node, autopilot_url="", **(settings or {})),
@@ -275,7 +275,7 @@ def count_bobs(monkeypatch: Any) -> list[Any]:
     import companion.bob_answers
 
     built: list[Any] = []
-    real_bob = companion.bob_answers.Bob
+    real_bob = Bob
 
     def counting_bob(*args: Any, **kwargs: Any) -> Any:
         built.append(args)

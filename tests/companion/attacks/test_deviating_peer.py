@@ -127,8 +127,10 @@ def test_a_bob_whose_ot_extension_fails_the_check_loses_the_setup(
     key is made, reports no result and keeps no setup, so no guess is ever tried twice on
     one Delta; once drone 2 behaves, a fresh setup gives the answer."""
     import protocol.suite_compact as compact
+    from protocol.ot.extension import chooser_extend
+    from protocol.ot.setup import HolderSetupStart
 
-    honest = compact.chooser_extend
+    honest = chooser_extend
     probes = {"left": 3}
 
     def deviating(setup: Any, nonce: bytes, count: int) -> Any:
@@ -142,14 +144,14 @@ def test_a_bob_whose_ot_extension_fails_the_check_loses_the_setup(
 
     monkeypatch.setattr(compact, "chooser_extend", deviating)
     setup_ids: list[bytes] = []
-    real_finish = compact.HolderSetupStart.finish
+    real_finish = HolderSetupStart.finish
 
     def finish(self: Any, reply: bytes) -> Any:
         setup = real_finish(self, reply)
         setup_ids.append(setup.setup_id)
         return setup
 
-    monkeypatch.setattr(compact.HolderSetupStart, "finish", finish)
+    monkeypatch.setattr(HolderSetupStart, "finish", finish)
 
     async def main() -> World:
         w = await world(tmp_path)

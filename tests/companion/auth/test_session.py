@@ -64,10 +64,8 @@ def test_message_1_is_checked_before_any_work(fleet: dict[int, Identity]) -> Non
         bob.verify(fleet[3].cert, NOW, 30.0)  # claims another drone's certificate
     with pytest.raises(AuthenticationError, match="before it arrived"):
         bob.verify(fleet[1].cert, NOW + 600, 30.0)  # a recording played ten minutes later
-    assert (
-        Responder(fleet[2], Init.parse(msg1), ROUTE).verify(fleet[1].cert, NOW + 600, 30, 3600)
-        is None
-    )
+    # ... accepted with an hour's tolerance (no exception)
+    Responder(fleet[2], Init.parse(msg1), ROUTE).verify(fleet[1].cert, NOW + 600, 30, 3600)
     for other in (Route(1, 2, 4712), Route(3, 2, 4711)):  # another session, another sender
         with pytest.raises(AuthenticationError):
             Responder(fleet[2], Init.parse(msg1), other).verify(fleet[1].cert, NOW, 30.0)

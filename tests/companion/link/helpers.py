@@ -15,7 +15,7 @@ from companion.link import (
     LinkProfile,
     SimMedium,
 )
-from companion.link.medium import SimTransport
+from companion.link.medium import Receiver, SimTransport
 
 
 class LoggingTransport:
@@ -25,7 +25,7 @@ class LoggingTransport:
         self.inner = inner
         self.log: list[tuple[float, float, int]] = []
 
-    def set_receiver(self, callback):  # type: ignore[no-untyped-def]
+    def set_receiver(self, callback: Receiver) -> None:
         self.inner.set_receiver(callback)
 
     async def transmit(self, frame: bytes, airtime: float) -> None:
@@ -55,7 +55,7 @@ async def pair(
     channel = Channel(impairments or Impairments(), seed)
     medium = SimMedium(channel, clock)
     ta, tb = LoggingTransport(medium.attach(1)), LoggingTransport(medium.attach(2))
-    a = LinkEndpoint(1, ta, link, config, clock)  # type: ignore[arg-type]
-    b = LinkEndpoint(2, tb, link, config, clock)  # type: ignore[arg-type]
+    a = LinkEndpoint(1, ta, link, config, clock)
+    b = LinkEndpoint(2, tb, link, config, clock)
     async with a, b:
         yield Pair(a, b, channel, {1: ta.log, 2: tb.log})

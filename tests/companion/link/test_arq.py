@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import random
+import secrets
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from companion.link import reassembly
 from companion.link.arq import LinkTimeout, MessageTooLarge, Outgoing
 from companion.link.frames import Flag, Frame, FrameType, decode_frame
 from companion.link.reassembly import Receiver
@@ -217,7 +217,7 @@ def test_sequence_numbers_wrap_around() -> None:
 def test_a_copy_begun_again_never_reuses_the_epoch(monkeypatch: pytest.MonkeyPatch) -> None:
     """Epochs were drawn at random per copy: once in 255 restarts the new copy had the old
     epoch, the sender trusted its stale acknowledgements and the message was lost."""
-    monkeypatch.setattr(reassembly.secrets, "randbelow", lambda n: 41)  # every draw the same
+    monkeypatch.setattr(secrets, "randbelow", lambda n: 41)  # every draw the same
     receiver = Receiver(2, idle_timeout=10.0)
     out = Outgoing(1, 2, 7, 0, bytes(range(250)) * 2, 100)
     for frame in out.burst()[:4]:

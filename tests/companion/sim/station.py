@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import asyncio
 import struct
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from typing import Any
+from typing import Any, Protocol
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -48,6 +48,20 @@ def home_item(home: tuple[float, float, float] = HOME) -> MissionItem:
     return item(0, 16, *home, frame=0).replace(param4=0.0)
 
 
+class Build(Protocol):
+    """Makes one message with the station's ``MAVLink``: ``build(mav)``.  (A protocol rather
+    than ``Callable[[Any], Any]``: mypy cannot infer a lambda with a default argument, such as
+    ``lambda m, seq=seq: ...``, against a ``Callable``.)"""
+
+    def __call__(self, mav: Any, /) -> Any: ...
+
+
+class Where(Protocol):
+    """Picks the messages :meth:`Station.expect` waits for: ``where(message)``."""
+
+    def __call__(self, message: Any, /) -> bool: ...
+
+
 class Station(asyncio.DatagramProtocol):
     """A bare pymavlink ground station: sends to one port of the mock, queues what comes."""
 
@@ -72,7 +86,7 @@ class Station(asyncio.DatagramProtocol):
         for message in self.mav.parse_buffer(data) or []:
             self.inbox.put_nowait(message)
 
-    def send(self, build: Callable[[Any], Any]) -> None:
+    def send(self, build: Build) -> None:
         assert self.transport is not None
         self.transport.sendto(build(self.mav).pack(self.mav), ("127.0.0.1", self.to_port))
 
@@ -80,9 +94,7 @@ class Station(asyncio.DatagramProtocol):
         while not self.inbox.empty():
             self.inbox.get_nowait()
 
-    async def expect(
-        self, *names: str, timeout: float = 3.0, where: Callable[[Any], bool] | None = None
-    ) -> Any:
+    async def expect(self, *names: str, timeout: float = 3.0, where: Where | None = None) -> Any:
         """The next message of one of the types ``names`` (and ``where``), others dropped."""
         async with asyncio.timeout(timeout):
             while True:

@@ -39,6 +39,15 @@ from .replay_checks import (
 pytestmark = pytest.mark.xdist_group("realtime")
 
 
+# In real time at 10-40x each protocol step's CPU counts 10-40 times its seconds of flight (a
+# companion computer that much slower than this one), and MAVSDK's telemetry lags by as many
+# seconds per second of a loaded machine: runs end later than on the virtual clock, and the
+# fail-safe may act once where the virtual replays (CPU 1:1, test_virtual_replay.py) assert
+# it never does (measured under make test: 1 precaution in about 1 of 3 suites, in the
+# in-flight crossing at 10x or the crossing at 40x after a telemetry-lag retime).
+REALTIME_PRECAUTIONS = 1
+
+
 def _replay(name: str) -> Report:
     run = subprocess.run(
         [sys.executable, "-m", "companion", "replay", str(SCENARIOS / f"{name}.toml"), "--json"],
@@ -58,7 +67,7 @@ def test_ardupilot_scenario() -> None:
     """ArduPilot over MAVLink: its home is item 0, it reads frames back its own way, it keeps
     its current item on an upload."""
     report = _replay("ardupilot")
-    check(report, {1})
+    check(report, {1}, precautions=REALTIME_PRECAUTIONS)
     assert report["conflicts"] == 1
 
 
@@ -75,9 +84,9 @@ def test_in_flight_edits_over_mavsdk(name: str, climbing: int) -> None:
     minute of flight, and the first result comes too late for the first leg."""
     report = asyncio.run(run_replay(scenario(name, time_scale=10.0))).report.to_json()
     assert not report["virtual_time"] and report["drones"][0]["vehicle"] == "mock"
-    check_in_flight(report, climbing, 1, precautions=0)
+    check_in_flight(report, climbing, 1, precautions=REALTIME_PRECAUTIONS)
     if name == "sep_first_leg":
-        check_separation(report, name, {1}, 1)
+        check_separation(report, name, {1}, 1, precautions=REALTIME_PRECAUTIONS)
         assert report["drones"][0]["vehicle_holds"] == "edited"
 
 
@@ -87,7 +96,7 @@ def test_crossing_as_a_user_runs_it(tmp_path: Path) -> None:
     report, the PDF plot, the exports (CSV, KML, GeoJSON) and a JSON-lines log with the run's
     progress are all written."""
     out, plot, export, log = (tmp_path / n for n in ("r.json", "p.pdf", "exp", "log.jsonl"))
-    flags = ["--out", out, "--plot", plot, "--export", export, "--log-json", log]
+    flags: list[str | Path] = ["--out", out, "--plot", plot, "--export", export, "--log-json", log]
     run = subprocess.run(
         [sys.executable, "-m", "companion", "replay", SCENARIOS / "crossing.toml", *flags],
         capture_output=True,
@@ -99,7 +108,7 @@ def test_crossing_as_a_user_runs_it(tmp_path: Path) -> None:
     assert re.match(r"OK( \(with notes\))?: every mission flown", last), last
     assert "MAVSDK version" not in run.stderr  # the library's chatter goes through logging
     report = json.loads(out.read_text())
-    check(report, {1})
+    check(report, {1}, precautions=REALTIME_PRECAUTIONS)
     assert report["conflicts"] == 1
     assert plot.read_bytes().startswith(b"%PDF")
     events = [json.loads(line) for line in log.read_text().splitlines()]

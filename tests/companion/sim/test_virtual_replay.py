@@ -139,7 +139,10 @@ def test_fault_link_at_30_percent_loss() -> None:
     lossy = with_drone(with_drone(crossing, 2, mission=longer), 1, takeoff_delay_s=400.0)
     report = run_virtual(lossy).report.to_json()
     alice = report["drones"][0]
-    assert alice["flagged_segments"] == alice["conflicting_segments"] == [0]
+    # (failed once in about 50 runs under make test, not reproduced in 46 more: what the
+    # drone did is in the message the next time)
+    why = (alice["runs"], alice["failures"], alice["precautionary"], alice["timeline"])
+    assert alice["flagged_segments"] == alice["conflicting_segments"] == [0], why
     assert alice["vehicle_holds"] == "edited"
     assert report["conflicts_resolved"] == report["conflicts"] == 1
 

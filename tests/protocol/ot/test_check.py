@@ -8,6 +8,7 @@ from __future__ import annotations
 import secrets
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -75,7 +76,9 @@ def _pair(kappa: int = 112) -> tuple[ChooserSetup, HolderSetup]:
     return chooser, start.finish(reply)
 
 
-def _bob_state(setup: ChooserSetup, nonce: bytes, total: int) -> tuple[list, np.ndarray, list]:
+def _bob_state(
+    setup: ChooserSetup, nonce: bytes, total: int
+) -> tuple[list[npt.NDArray[np.uint8]], npt.NDArray[np.uint8], list[npt.NDArray[np.uint8]]]:
     """Bob's columns (t), choice bits and per-block u, as :func:`chooser_extend` makes them."""
     columns, sums = [], []
     for k, leaves in zip(setup.blocks, setup.leaves, strict=True):
