@@ -17,6 +17,7 @@ from protocol.intersection import MAX_SEGMENTS, Limits
 
 from .auth.trust import UnknownPeers
 from .beacon import Beacon, CertBeacon, size_class
+from .core import ASK_BACKOFF_S
 from .edits import Edits
 from .events import EventKind
 from .link.arq import LinkError
@@ -172,7 +173,9 @@ class Beaconing(Edits):
             peer = None
         new_peer = peer is None
         if peer is None:
-            peer = self.peers[src] = Peer(src, beacon, now, identity=neighbour.fingerprint)
+            peer = self.peers[src] = Peer(
+                src, beacon, now, identity=neighbour.fingerprint, met_at=now
+            )
             self.record(
                 EventKind.PEER,
                 peer=src,
@@ -205,13 +208,18 @@ class Beaconing(Edits):
 
     def _may_ask(self, node: int) -> bool:
         """Whether to ask again for what a node's beacons lack (its certificate, or its tag for
-        us): at once the first time, then less and less often (to 5 minutes) while it stays
-        so -- a drone that does not trust us would otherwise make us ask forever."""
+        us): at once the first time, then less and less often (to ``ASK_BACKOFF_S``, or four
+        beacon intervals on a duty-cycled link, at most a signed-beacon period) while it
+        stays so -- a drone that does not trust us would otherwise make us ask at every
+        beacon."""
         now = self.clock.now()
         due, interval = self._asking.get(node, (now, self._asked_every_s / 2))
         if now < due:
             return False
-        interval = min(2 * interval, self._signed_every_s)
+        duty_cycled = self.endpoint.profile.duty_cycle is not None
+        longest = 4 * self.beacon_interval if duty_cycled else ASK_BACKOFF_S
+        longest = min(self._signed_every_s, longest)
+        interval = min(2 * interval, longest)
         self._asking[node] = (now + interval, interval)
         return True
 

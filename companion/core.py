@@ -67,6 +67,10 @@ NEAR_SEGMENTS = 2  # each side of a near run compares at least its next two segm
 SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one),
 SIGNED_EVERY = 30  # and at most every 30th beacon (a duty cycle stretches beacons to minutes)
 ASKED_AGAIN = 0.5  # asked for, a certificate or signed beacon at most every half interval
+ASK_BACKOFF_S = 30.0  # asking a drone again for what its beacons lack: at most this far apart
+# (or four beacon intervals where a duty cycle stretches them) -- at 30 % loss one exchange
+# of certificates fails about one time in two, and a backoff to 5 minutes left a drone
+# unknown to its peer for 6 minutes in about one replay in fifty (it took off uncompared)
 
 
 @dataclass(frozen=True)
@@ -279,10 +283,22 @@ class CompanionCore:
         """A comparison as Alice is under way, half done, or put off by a peer busy with its
         own (a drone about to take off waits for it); not one half done with a peer that has
         since gone out of range or fallen silent: it resumes if they meet again."""
+        now = self.clock.now()
         return self._busy.locked() or any(
-            (p.plan or p.busy) and self._pending(p) and not self._silent_for(p)
+            (p.plan or p.busy or self._introducing(p, now))
+            and self._pending(p)
+            and not self._silent_for(p)
             for p in self.peers.values()
         )
+
+    def _introducing(self, peer: Peer, now: float) -> bool:
+        """A peer we know that does not know us yet (no tag for us in its beacons: it lacks
+        our certificate or beacon key), met less than a signed-beacon period ago: the run
+        waits for the introduction, and so does a take-off held for comparisons -- not for
+        ever (a drone that does not trust us never will)."""
+        neighbour = self.neighbours.get(peer.node)
+        knows_us = neighbour is not None and neighbour.knows_us
+        return not knows_us and now - peer.met_at < self._signed_every_s
 
     @property
     def on_ground(self) -> bool:

@@ -105,6 +105,7 @@ class Peer:
     range_rate: float = 0.0  # m/s, positive while we fly apart
     measured: bool = False  # range_rate comes from two beacons
     made_at: float | None = None  # link time its beacon's position was taken (its stamp)
+    met_at: float = 0.0  # link time it became a peer
 
     @property
     def position(self) -> tuple[int, int]:

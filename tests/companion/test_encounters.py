@@ -4,6 +4,7 @@ radio turns, and the planner's levels."""
 from __future__ import annotations
 
 import asyncio
+import itertools
 import logging
 import math
 import statistics
@@ -387,6 +388,28 @@ def test_guard_leaves_a_leg_already_raised_for_the_peer() -> None:
     companion = run_simulated(main())
     actions = [e for e in companion.events if e.kind == "precautionary"]
     assert all(1 not in e.detail["segments"] for e in actions)
+
+
+def test_asking_an_unchecked_drone_backs_off_to_30_seconds_at_most() -> None:
+    """A drone whose beacons we cannot check yet: asked at once, then less and less often
+    -- but never more than 30 s apart on US915, so a few lost exchanges at
+    30 % loss cost seconds, not minutes (it backed off to 5 minutes before)."""
+    items, _ = read_plan(SCENARIOS / "inflight_east.plan")
+
+    async def main() -> list[float]:
+        clock = Clock()
+        c, _ = alone(items, clock)
+        asks = []
+        for _ in range(400):
+            if c._may_ask(9):
+                asks.append(clock.now())
+            await clock.sleep(1.0)
+        return asks
+
+    asks = run_simulated(main())
+    gaps = [b - a for a, b in itertools.pairwise(asks)]
+    assert asks[0] == 0.0 and gaps[:3] == sorted(gaps[:3])  # at once, then less often
+    assert max(gaps) <= 30.0 + 1.0 and len(asks) >= 14
 
 
 def test_edit_is_built_on_the_held_mission_and_keeps_the_current_item() -> None:
