@@ -132,10 +132,7 @@ class AliceRuns(Edits):
         )
         ends = now + left / speed
         if peer.near_run is not None:
-            started, shown = peer.near_run
-            ends = min(
-                ends, started + shown / max(self._peer_speed(peer), self.settings.cruise_m_s)
-            )
+            ends = min(ends, self._near_expires(peer))
         grid = self._grid(path)
         limits = Limits()
         m = limits.padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
@@ -186,7 +183,7 @@ class AliceRuns(Edits):
         cruise = self.settings.cruise_m_s
         meet = time_to_meet(self.position[:2], speed, peer, floor_m_s=cruise, measured=False)
         gap = segment_distance_m(peer.position, a, b) - self.settings.separation.horizontal_m
-        reach = max(gap, 0.0) / max(self._peer_speed(peer), cruise) - self._silent_for(peer)
+        reach = max(gap, 0.0) / self._peer_pace(peer) - self._silent_for(peer)
         return max(meet, reach)
 
     def _before_meeting(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
@@ -230,7 +227,7 @@ class AliceRuns(Edits):
         the horizon at the peer's speed, :meth:`_decided`)."""
         # The same time ahead as ours: the peer may fly faster than we do.
         ours = max(self.speed_m_s, self.settings.cruise_m_s)
-        theirs = max(self._peer_speed(peer), self.settings.cruise_m_s)
+        theirs = self._peer_pace(peer)
         horizon = max(horizon, math.ceil(horizon * theirs / ours))
         schedule = self._schedule(self.original, self.path, start, self.original_current)
         last = start + len(path) - 2

@@ -291,14 +291,17 @@ class CompanionCore:
             for p in self.peers.values()
         )
 
-    def _introducing(self, peer: Peer, now: float) -> bool:
-        """A peer we know that does not know us yet (no tag for us in its beacons: it lacks
-        our certificate or beacon key), met less than a signed-beacon period ago: the run
-        waits for the introduction, and so does a take-off held for comparisons -- not for
-        ever (a drone that does not trust us never will)."""
+    def _knows_us(self, peer: Peer) -> bool:
+        """Its tagged beacons carry a tag for us: it holds our beacon key (it heard us)."""
         neighbour = self.neighbours.get(peer.node)
-        knows_us = neighbour is not None and neighbour.knows_us
-        return not knows_us and now - peer.met_at < self._signed_every_s
+        return neighbour is not None and neighbour.knows_us
+
+    def _introducing(self, peer: Peer, now: float) -> bool:
+        """A peer we know that does not know us yet (it lacks our certificate or beacon
+        key), met less than a signed-beacon period ago: the run waits for the introduction,
+        and so does a take-off held for comparisons -- not for ever (a drone that does not
+        trust us never will)."""
+        return not self._knows_us(peer) and now - peer.met_at < self._signed_every_s
 
     @property
     def on_ground(self) -> bool:
@@ -334,9 +337,7 @@ class CompanionCore:
     def _should_compare(self, peer: Peer, now: float) -> bool:
         """Pending, not waiting for a retry, and the peer can check our requests: its tagged
         beacons carry a tag for us (it holds our beacon key, so it heard us)."""
-        neighbour = self.neighbours.get(peer.node)
-        knows_us = neighbour is not None and neighbour.knows_us
-        return now >= peer.next_try and knows_us and self._pending(peer)
+        return now >= peer.next_try and self._knows_us(peer) and self._pending(peer)
 
     def _pending(self, peer: Peer) -> bool:
         """We are Alice for this peer, it is in range, and its paths are not compared yet."""
@@ -599,6 +600,18 @@ class CompanionCore:
         )
         self._beacon_now.set()
 
+    def _peer_pace(self, peer: Peer) -> float:
+        """How fast the peer may fly through the path it showed: its speed, at least cruise."""
+        return max(self._peer_speed(peer), self.settings.cruise_m_s)
+
+    def _near_expires(self, peer: Peer) -> float:
+        """When the peer may be past the path its last near run showed (its horizon at
+        :meth:`_peer_pace` from the run's start); -inf without a near run."""
+        if peer.near_run is None:
+            return -math.inf
+        started, horizon = peer.near_run
+        return started + horizon / self._peer_pace(peer)
+
     def _decided(self, peer: Peer) -> set[int]:
         """Our segments whose comparison with ``peer`` stands: those settled (a full run
         compared them, or we leave them before the peer could come near), those a run found
@@ -611,9 +624,7 @@ class CompanionCore:
         near = peer.covered - decided
         if not near or peer.near_run is None:
             return decided
-        started, horizon = peer.near_run
-        speed = max(self._peer_speed(peer), self.settings.cruise_m_s)
-        beyond = started + horizon / speed - self.clock.now() - self.settings.failsafe.margin_s
+        beyond = self._near_expires(peer) - self.clock.now() - self.settings.failsafe.margin_s
         if self.on_ground and not self.has_flown:
             return decided  # (take-off time unknown: windows never close)
         start = self._remaining_path()[0]

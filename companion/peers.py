@@ -186,18 +186,6 @@ def time_to_meet(
     return distance / closing
 
 
-def segments_within(
-    path: Sequence[tuple[int, int]], first: int, point: tuple[int, int], reach_m: float
-) -> list[int]:
-    """Indices (``first`` + k) of the path's segments that come within ``reach_m`` of
-    ``point``."""
-    return [
-        first + k
-        for k, (a, b) in enumerate(itertools.pairwise(path))
-        if segment_distance_m(point, a, b) <= reach_m
-    ]
-
-
 def reached_within(
     path: Sequence[tuple[int, int]],
     first: int,

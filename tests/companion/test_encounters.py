@@ -31,7 +31,6 @@ from companion.peers import (
     distance_m,
     near_cut,
     reached_within,
-    segments_within,
     time_to_meet,
 )
 from companion.planner import plan_offsets
@@ -89,7 +88,6 @@ def test_cut_counts_from_the_drone() -> None:
     assert cut_at(path, 150, north(200)) == path[:3]
     assert reached_within(path, 4, north(250), 100) == {4, 5}
     assert reached_within(path, 4, north(250), 10) == {4}
-    assert segments_within(path, 4, north(1000), 150) == [6]
 
 
 def test_near_cut_takes_what_the_padding_makes_free() -> None:
@@ -328,13 +326,11 @@ def test_profiles() -> None:
     assert distance_m(north(0), north(1000)) == pytest.approx(1000.0, rel=0.001)
 
 
-@pytest.mark.parametrize("busy_s", [0.0, 100.0])
-def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None:
+def _guarded(busy_s: float, raised: bool = False) -> tuple[Companion, FakeAutopilot]:
     """Drone 1 flies east towards the crossing at 0 m (425 m ahead); peer 2, 800 m south of
-    it, waits for its turn while the radio is busy with a run with peer 3 for ``busy_s``.
-    Idle, a first run with 2 could still end in time: nothing to do.  Busy for 100 s, even
-    the smallest run with 2 would be late: the guard climbs over the crossing leg for 2
-    without waiting for a run, and says so (``waiting``)."""
+    it, waits for its turn while the radio is busy with a run with peer 3 for ``busy_s``;
+    ``raised``: a run already found the crossing leg (segment 1) in conflict with 2 and the
+    drone flies it 15 m up.  Five seconds of the fail-safe's guard."""
     items, _ = read_plan(SCENARIOS / "inflight_east.plan")  # -600, -250, 250, 600 m east
 
     async def main() -> tuple[Companion, FakeAutopilot]:
@@ -345,14 +341,26 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
         (lat, west), (_, east_) = c.path.points[:2]  # -600 and -250 m: half-way, flying east
         c.position = (lat, (west + east_) // 2, 518.0)
         south = (C_LAT - round(800 / M_PER_E7_LAT), C_LON)
-        c.peers[2] = Peer(2, beacon(south), heard_at=clock.now())
+        c.peers[2] = Peer(
+            2, beacon(south), heard_at=clock.now(), conflicts={1} if raised else set()
+        )
+        if raised:
+            c.raises = {1: 15.0}
         c._running = (3, clock.now() + busy_s)
         guard = asyncio.create_task(c._guard())
         await clock.sleep(5.0)
         guard.cancel()
         return c, autopilot
 
-    companion, autopilot = run_simulated(main())
+    return run_simulated(main())
+
+
+@pytest.mark.parametrize("busy_s", [0.0, 100.0])
+def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None:
+    """Idle (:func:`_guarded`), a first run with 2 could still end in time: nothing to do.
+    Busy for 100 s, even the smallest run with 2 would be late: the guard climbs over the
+    crossing leg for 2 without waiting for a run, and says so (``waiting``)."""
+    companion, autopilot = _guarded(busy_s)
     actions = [e for e in companion.events if e.kind == "precautionary"]
     if not busy_s:
         assert not actions and not autopilot.uploads
@@ -364,28 +372,10 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
 
 
 def test_guard_leaves_a_leg_already_raised_for_the_peer() -> None:
-    """The same busy radio, but a run already found the crossing leg in conflict with peer 2
-    and the drone flies it raised (a retime made them compare again): no precaution climbs
-    it again -- the raise stands until the new result."""
-    items, _ = read_plan(SCENARIOS / "inflight_east.plan")
-
-    async def main() -> Companion:
-        clock = Clock()
-        c, _ = alone(items, clock)
-        c.path = flight_path(items, None)
-        c.relative_alt, c.current_item, c.speed_m_s = 30.0, 2, 10.0
-        (lat, west), (_, east_) = c.path.points[:2]
-        c.position = (lat, (west + east_) // 2, 518.0)
-        south = (C_LAT - round(800 / M_PER_E7_LAT), C_LON)
-        c.peers[2] = Peer(2, beacon(south), heard_at=clock.now(), conflicts={1})
-        c.raises = {1: 15.0}
-        c._running = (3, clock.now() + 100.0)
-        guard = asyncio.create_task(c._guard())
-        await clock.sleep(5.0)
-        guard.cancel()
-        return c
-
-    companion = run_simulated(main())
+    """The same busy radio, but the drone already flies the crossing leg raised for peer 2
+    (a retime made them compare again): no precaution climbs it again -- the raise stands
+    until the new result."""
+    companion, _ = _guarded(100.0, raised=True)
     actions = [e for e in companion.events if e.kind == "precautionary"]
     assert all(1 not in e.detail["segments"] for e in actions)
 
