@@ -1,13 +1,13 @@
 """Beacons: what a drone announces on the radio every few seconds (pure, fixed width).
 
-Every position beacon starts with the same 24 bytes::
+Every position beacon starts with the same 26 bytes::
 
     head u8 | flags u8 | lat i32 (degE7) | lon i32 | alt i16 (m AMSL) | mission_version u16
-    | slot base u16 | slot mask u32 | size_class u8 | time u16 (Unix s mod 2^16) | counter u8
+    | slot base u16 | slot mask u32 | size_class u8 | time u32 (Unix s) | counter u8
 
 and is authenticated in one of two ways:
 
-* **signed** (136 + 4 k bytes): ``body | beacon key (32) | keys_hash (16) | Ed25519
+* **signed** (138 + 4 k bytes): ``body | beacon key (32) | keys_hash (16) | Ed25519
   signature (64) | k tags`` -- signed under the key the sender's certificate names (the tags,
   as below, tell each neighbour that the sender holds its key).  It carries the sender's
   *beacon key*, an X25519 key made at every start, and ``keys_hash``, the hash of all its
@@ -15,7 +15,7 @@ and is authenticated in one of two ways:
   :func:`keys_hash`).  Sent at
   the start, when a new drone asks, when the sender learns a new neighbour, and every few
   minutes.
-* **tagged** (24 + 4 k bytes): ``body | k tags of 4 bytes`` -- one per neighbour whose beacon
+* **tagged** (26 + 4 k bytes): ``body | k tags of 4 bytes`` -- one per neighbour whose beacon
   key the sender holds (at most 8): HMAC-SHA256 under a key only the two of them can compute
   (X25519 of their beacon keys, per direction), cut to 4 bytes, as LoRaWAN's and Bluetooth's
   message integrity codes are.  A receiver checks the tag meant for it (it tries the k): a
@@ -24,14 +24,16 @@ and is authenticated in one of two ways:
 
 The receiver drops a beacon it cannot check, whose time is more than the allowed skew off its
 clock, or whose (time, counter) is not above the last one it accepted from that drone (a
-replay; remembered on disk).  The time travels as its low 16 bits; the receiver takes the
-full time nearest its own clock (unambiguous within 9 hours).
+replay; remembered on disk).  The time travels whole (Unix seconds, good until 2106): a
+beacon recorded any time before is stale for ever -- with only its low 16 bits (until format
+5) a beacon recorded 65,536 s earlier read as fresh, and its old beacon key then made the
+drone's genuine beacons look like replays.
 
 Certificate beacon (117 bytes): ``head | flags | certificate``
 (:mod:`companion.auth.certificate`); flag WANT: the sender heard a beacon it could not check
 and asks the drones nearby for their certificates and signed beacons.
 
-``head``: the format version (4) in the high nibble, the kind in the low one.  Position
+``head``: the format version (6) in the high nibble, the kind in the low one.  Position
 flags: bit 0 on the ground (about to take off), bits 1-2 the cipher suites offered.
 ``size_class``: the remaining path's padded size is at most 2^size_class segments (a run
 asking for more is refused before any work).  ``mission_version``: a digest of the path as
@@ -56,15 +58,15 @@ from .auth.certificate import Certificate, CertificateError
 from .auth.keys import SIGNATURE_SIZE, PublicKey, SigningKey
 from .levels import Slots
 
-VERSION = 5
+VERSION = 6
 SIGNED, CERTIFICATE, TAGGED = 1, 2, 3
 KEYS_HASH_SIZE = 16
 BEACON_KEY_SIZE = 32
 TAG_SIZE = 4
 MAX_TAGS = 8
-_BODY = struct.Struct(">BBiihHHIBHB")
-BODY_SIZE = _BODY.size  # 24
-SIGNED_SIZE = BODY_SIZE + BEACON_KEY_SIZE + KEYS_HASH_SIZE + SIGNATURE_SIZE  # 136
+_BODY = struct.Struct(">BBiihHHIBIB")
+BODY_SIZE = _BODY.size  # 26
+SIGNED_SIZE = BODY_SIZE + BEACON_KEY_SIZE + KEYS_HASH_SIZE + SIGNATURE_SIZE  # 138
 CERT_BEACON_SIZE = 2 + CERT_SIZE  # 117
 UNAUTHENTICATED_SIZE = 24  # what a beacon was before it was authenticated (for the costs)
 ON_GROUND = 0x01
@@ -93,7 +95,7 @@ class Beacon:
     on_ground: bool
     suites: frozenset[Suite]
     mission_version: int
-    time: int  # Unix seconds (as received: the low 16 bits, see :func:`full_time`)
+    time: int  # Unix seconds
     counter: int
     slots: Slots = Slots()  # noqa: RUF009 (frozen: immutable)
     size_class: int = MAX_SIZE_CLASS
@@ -113,7 +115,7 @@ class Beacon:
             self.slots.base,
             self.slots.mask,
             self.size_class,
-            self.time & 0xFFFF,
+            self.time & 0xFFFFFFFF,
             self.counter & 0xFF,
         )
 
@@ -135,12 +137,6 @@ class Beacon:
         """The tagged form: one tag per neighbour key (at most MAX_TAGS)."""
         body = self.body(TAGGED)
         return body + b"".join(beacon_tag(k, node, body) for k in tag_keys[:MAX_TAGS])
-
-
-def full_time(low: int, now: float) -> int:
-    """The Unix time whose low 16 bits are ``low``, nearest ``now``."""
-    base = int(now) - (int(now) & 0xFFFF) + low
-    return min((base - 0x10000, base, base + 0x10000), key=lambda t: abs(t - now))
 
 
 def beacon_tag(key: bytes, node: int, body: bytes) -> bytes:

@@ -13,14 +13,13 @@ first one is still heard (a certified drone cannot squat an address another is u
 
 from __future__ import annotations
 
-import dataclasses
 import enum
 from dataclasses import dataclass
 
 from .auth.beacon_keys import BeaconKeys
 from .auth.certificate import Certificate
 from .auth.trust import Operator, TrustStore, UntrustedPeer
-from .beacon import Beacon, BeaconError, CertBeacon, SignedBeacon, decode_beacon, full_time
+from .beacon import Beacon, BeaconError, CertBeacon, SignedBeacon, decode_beacon
 from .state import StateStore
 
 HOLD_NODE_S = 120.0  # a node id stays with its drone this long after it was last heard
@@ -134,7 +133,7 @@ class Neighbours:
             return Hearing(Heard.UNKNOWN, src, reason="no tag for us")
         else:
             mine = True
-        beacon = dataclasses.replace(decoded.beacon, time=full_time(decoded.beacon.time, now))
+        beacon = decoded.beacon
         if abs(beacon.time - now) > self.max_skew_s:
             return Hearing(Heard.REJECTED, src, reason=f"time {beacon.time - now:+.0f} s off")
         order = beacon.time << 8 | beacon.counter

@@ -28,6 +28,15 @@ def run(main: Any) -> Any:
     return run_simulated(main)
 
 
+def position_beacons(w: World, node: int) -> list[Frame]:
+    """The position beacons ``node`` has sent (a certificate played again is no news)."""
+    return [
+        f for _, f in w.sniffer.frames
+        if f.type is FrameType.BEACON and f.src == node
+        and not isinstance(decode_beacon(f.payload), CertBeacon)
+    ]  # fmt: skip
+
+
 def test_replayed_beacons_are_dropped(tmp_path: Path) -> None:
     """Every position beacon drone 2 sent, played again later: drone 1 drops each one and its
     view of drone 2 does not move.  (A certificate played again is no news: it is public.)"""
@@ -37,11 +46,7 @@ def test_replayed_beacons_are_dropped(tmp_path: Path) -> None:
         await w.clock.sleep(120)
         await w.drones[2].stop()  # silent now: whatever drone 1 hears of "2" is the attacker
         await w.clock.sleep(2)  # a frame still on its way when drone 2 stopped has landed
-        recorded = [
-            f for _, f in w.sniffer.frames
-            if f.type is FrameType.BEACON and f.src == 2
-            and not isinstance(decode_beacon(f.payload), CertBeacon)
-        ]  # fmt: skip
+        recorded = position_beacons(w, 2)
         peer = w.drones[1].peers[2]
         heard, before = peer.heard_at, sum(w.drones[1].rejected.values())
         for frame in recorded:
@@ -55,6 +60,35 @@ def test_replayed_beacons_are_dropped(tmp_path: Path) -> None:
     w, recorded, drops = run(main())
     assert recorded >= 3 and drops == recorded
     assert any("replay" in reason for reason in w.drones[1].rejected)
+
+
+@pytest.mark.parametrize("later_s", [65_536, 65_536 * 7 + 12])
+def test_beacons_recorded_hours_ago_are_never_fresh_again(tmp_path: Path, later_s: int) -> None:
+    """Beacons drone 2 sent, played again 2^16 s (18 h 12 min) later -- or seven times that,
+    a little off: with the time cut to its low 16 bits they read as "now" and swapped in the
+    recorded keys.  With whole times each one is stale: dropped for its time, the peer does
+    not move."""
+
+    async def main() -> tuple[World, int, dict[str, int]]:
+        w = await world(tmp_path)
+        await w.clock.sleep(120)
+        await w.drones[2].stop()
+        await w.clock.sleep(2)
+        recorded = position_beacons(w, 2)
+        peer = w.drones[1].peers[2]
+        heard, rejected = peer.heard_at, dict(w.drones[1].rejected)
+        w.clock._wall_offset = w.clock.wall() - w.clock.now() + later_s  # the hours pass
+        for frame in recorded:
+            await w.inject(frame.encode())
+        await w.clock.sleep(0.5)
+        assert peer.heard_at == heard  # nothing replayed moved the peer
+        new = {k: v - rejected.get(k, 0) for k, v in w.drones[1].rejected.items()}
+        await w.stop()
+        return w, len(recorded), {k: v for k, v in new.items() if v}
+
+    _, recorded, drops = run(main())
+    assert recorded >= 3 and sum(drops.values()) == recorded
+    assert all(reason.startswith("time") and "s off" in reason for reason in drops), drops
 
 
 def test_spoofed_node_ids_and_fingerprints_are_ignored(tmp_path: Path) -> None:

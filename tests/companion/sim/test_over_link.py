@@ -96,7 +96,7 @@ def test_bench_link_rows(paper_shaped: PaperShaped) -> None:
         assert row["auth_bytes"] >= 109 + 129 + 16
     sf9 = {c["kind"]: c for c in result["beacons"]["us915-sf9"]}
     assert sf9["signed"]["frames"] == 3 and sf9["tagged, 1 neighbour"]["frames"] == 1
-    assert "| us915-sf9 | signed | 136 | 3 |" in table
+    assert "| us915-sf9 | signed | 138 | 3 |" in table
 
 
 @pytest.mark.slow
