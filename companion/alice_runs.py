@@ -421,6 +421,7 @@ class AliceRuns(Edits):
                             and keys_hash(boot, neighbour.beacon_key, public) == neighbour.keys_hash
                         ),
                         timeout=self.settings.run_timeout_s,
+                        alive=functools.partial(self._still_heard, peer.node),
                     )
             except PeerRefused as exc:
                 if exc.code is Refusal.UNKNOWN_SETUP and attempt == 0:

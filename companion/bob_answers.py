@@ -9,12 +9,13 @@ the path.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 
 from protocol.errors import ProtocolError
 from protocol.grid import GridKind
-from protocol.intersection import Bob, State
+from protocol.intersection import Bob
 from protocol.volumes import Route as PathRoute
 from protocol.wire import Hello
 
@@ -27,7 +28,7 @@ from .exchange import serve_bob
 from .link.arq import LinkError
 from .link.frames import AbortCode
 from .mission import point_as_segment
-from .peers import MAX_SPEED_M_S, Peer, distance_m
+from .peers import Peer, distance_m
 from .progress import RunProgress
 from .radio import ANSWER_FULL, ANSWER_NEAR
 from .roles import Role
@@ -35,8 +36,6 @@ from .schedule import T_RANGE_S, route_volumes, run_volumes
 
 log = logging.getLogger("companion")
 SETUPS_PER_PEER = 2
-BOX_SLACK_M = 200.0  # Alice's box centre may be off her last beacon by this much, plus
-# what she can have flown since at peers.MAX_SPEED_M_S
 
 
 class BobAnswers(CompanionCore):
@@ -112,10 +111,11 @@ class BobAnswers(CompanionCore):
                             boot=self.boot,
                             timeout=self.settings.run_timeout_s,
                             first=responder.init.hello,
+                            alive=functools.partial(self._still_heard, peer),
                         )
                 finally:
                     self._sessions -= 1
-                    if bob.state is not State.DONE:  # no last message: Alice learnt nothing
+                    if not responder.keyed:  # no first reply: Alice learnt nothing
                         self.ledger.refund(ticket)
         except AuthenticationError as exc:
             self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
@@ -185,13 +185,17 @@ class BobAnswers(CompanionCore):
             if not self.store.first_request(init.replay_key, wall, forget):
                 raise AuthenticationError("a request answered before (a replay)")
         except AuthenticationError as exc:
-            self.endpoint.abort(peer, session, AbortCode.AUTH)
+            # Signed: the requester's link takes no abort without a proof (a stale request
+            # of an honest drone learns at once; a forger's learns nothing new).
+            proof = responder.abort_proof(AbortCode.AUTH)
+            self.endpoint.abort(peer, session, AbortCode.AUTH, proof)
             self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
             return None
         try:
             hello = Hello.from_bytes(init.hello)
         except ProtocolError as exc:
-            self.endpoint.abort(peer, session, AbortCode.PROTOCOL)
+            proof = responder.abort_proof(AbortCode.PROTOCOL)
+            self.endpoint.abort(peer, session, AbortCode.PROTOCOL, proof)
             self.record(EventKind.ANSWER_FAILED, peer=peer, error=str(exc))
             return None
         if known.role is Role.ALICE:
@@ -238,8 +242,11 @@ class BobAnswers(CompanionCore):
 
     def _plausible_box(self, hello: Hello, known: Peer) -> bool:
         """Alice's grid is centred where she is (her position when the run starts): within
-        what she can have flown since her last verified beacon; it reaches no further than
-        ``max_box_radius_m`` and is no finer than ``min_grid_resolution_mm``.  Bob's path is
+        what she can have flown since the last position her track of verified beacons makes
+        plausible (:attr:`Peer.anchor`: a beacon that jumps faster than ``MAX_SPEED_M_S``
+        moves no box), and within ``max_peer_range_m`` of us (a drone on our radio); it
+        reaches no further than ``max_box_radius_m`` and is no finer than
+        ``min_grid_resolution_mm``.  Bob's path is
         cut to her box, so a box elsewhere -- or one centred on her that spans a continent --
         would let a deviating Alice probe where Bob flies far from her.  The refusal depends
         on her request, her beacons and Bob's limits only, not on Bob's path."""
@@ -250,9 +257,12 @@ class BobAnswers(CompanionCore):
             return False
         if grid.radius_m > self.settings.max_box_radius_m:
             return False
-        age = max(self.clock.now() - known.heard_at, 0.0)
-        reach = BOX_SLACK_M + MAX_SPEED_M_S * age
-        return distance_m((grid.ref_lat_e7, grid.ref_lon_e7), known.position) <= reach
+        if known.anchor is None:
+            return False
+        centre = (grid.ref_lat_e7, grid.ref_lon_e7)
+        if distance_m(centre, self.position[:2]) > self.settings.max_peer_range_m:
+            return False  # not where a drone we hear on our radio can be
+        return distance_m(centre, known.anchor[1]) <= known.reach_m(self.clock.now())
 
     async def _refuse(self, peer: int, session: int, responder: Responder, code: Refusal) -> None:
         self.record(EventKind.REFUSED, peer=peer, reason=code.name)

@@ -42,6 +42,7 @@
     lookahead_s = 60.0                    # compare at least the next 60 s of flight first
     grid_radius_m = 500.0                 # smallest comparison box (doubled to hold the path)
     max_box_radius_m = 64000.0            # largest box a peer's run may ask of us
+    max_peer_range_m = 30000.0            # farthest a peer's box centre may be from us
     min_grid_resolution_mm = 100          # finest grid a peer's run may ask of us
     [failsafe]
     action = "climb"                      # "climb", "hold" or "off"
@@ -230,6 +231,7 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         initiation_range_m=positive(limits, "initiation_range_m", 5000.0),
         grid_radius_m=positive(limits, "grid_radius_m", 500.0),
         max_box_radius_m=positive(limits, "max_box_radius_m", 64000.0),
+        max_peer_range_m=positive(limits, "max_peer_range_m", 30000.0),
         min_grid_resolution_mm=limits.integer("min_grid_resolution_mm", 100, low=1),
         max_runs_per_peer=limits.integer("max_runs_per_peer", 8, low=1),
         max_runs_total=limits.integer("max_runs_total", 64, low=1),

@@ -86,6 +86,9 @@ class CompanionSettings:
     grid_resolution_mm: int = 2000  # 2 m cells: 15 m separation is 9 (docs/companion.md)
     grid_radius_m: float = 500.0  # smallest comparison box; doubled until it holds Alice's path
     max_box_radius_m: float = 64000.0  # largest box we answer in (as Bob): 40 m/s for 27 min
+    # Farthest from us a requester's box may be centred (as Bob): a drone we hear on a LoRa
+    # radio (km to tens of km), not a claim 50 km off.
+    max_peer_range_m: float = 30000.0
     min_grid_resolution_mm: int = 100  # finest grid we answer on (as Bob)
     max_runs_per_peer: int = 8  # runs a certified drone may ask of us per window
     max_runs_total: int = 64  # runs all peers together may ask of us per window
@@ -374,6 +377,12 @@ class CompanionCore:
         """Seconds since the peer was last heard if it has fallen silent, else 0."""
         age = self.clock.now() - peer.heard_at
         return age if age > self._silence_s else 0.0
+
+    def _still_heard(self, node: int) -> bool:
+        """The peer has not fallen silent (:meth:`_silence_s`): a run's message the link
+        gave up on goes again while it is heard -- a jammer, not a drone gone."""
+        peer = self.peers.get(node)
+        return peer is not None and not self._silent_for(peer)
 
     def _urgency(self, peer: Peer) -> float:
         return time_to_meet(

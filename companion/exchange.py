@@ -5,11 +5,19 @@ messages through a :class:`~companion.link.LinkEndpoint`, inside the authenticat
 :mod:`companion.auth.session` (a signed key exchange on the first two messages, AEAD on every
 message).  A run ends in exactly one of two known states: the machine DONE (Alice holds her
 bits), or the machine FAILED, the session closed on both sides (an ABORT frame with a one-byte
-code tells the peer) and every buffer freed.  The caller gets the result or one exception: a
-:class:`~protocol.errors.ProtocolError` (bad message;
+code and its proof tells the peer) and every buffer freed.  The caller gets the result or one
+exception: a :class:`~protocol.errors.ProtocolError` (bad message;
 :class:`~companion.auth.AuthenticationError` when it failed authentication),
 :class:`~companion.link.LinkTimeout` (peer silent, retries exhausted or the run's time limit),
 :class:`~companion.link.PeerAborted`, or :class:`PeerRefused` (the peer's signed refusal).
+
+Nobody else can end or spend a run: the link ignores an abort without the session's proof
+(:meth:`~companion.link.LinkEndpoint.secure`: the peer's signature, and once the keys exist
+its MAC).  Once keyed, while ``alive()`` says the peer is still heard, a message the link
+gave up on (a jammer) is sent again until the peer has it, and silence is waited out, within
+the run's time limit -- Bob counts a run from his first reply on, and what he computed
+reaches Alice unless every copy is jammed for that long.  A copy received again is no news
+and is skipped.
 
 Without a session object (``secure=None``) the messages travel in the clear: benchmarks use it
 to measure what authentication adds; the companion never does.
@@ -39,6 +47,7 @@ T = TypeVar("T")
 # Protocol steps get threads of their own: MAVSDK's blocking calls and streams occupy the
 # event loop's default pool, and a step queued behind them would wait for seconds.
 _WORKERS = concurrent.futures.ThreadPoolExecutor(max_workers=2, thread_name_prefix="protocol")
+RESEND_PAUSE_S = 5.0  # before a sealed message the link gave up on goes again
 
 
 class PeerRefused(Exception):
@@ -65,6 +74,7 @@ class RunReport:
     auth_bytes_sent: int = 0
     hits: list[bool] = field(default_factory=list)
     refused: Refusal | None = None  # Bob: the run ended with this signed refusal of his
+    resent: int = 0  # sealed messages sent again after the link gave up on them (a jammer)
 
     @property
     def wall_s(self) -> float:
@@ -79,9 +89,13 @@ class _Party:
         session: int,
         machine: Alice | Bob,
         report: RunReport,
+        channel: Initiator | Responder | None = None,
+        alive: Callable[[], bool] | None = None,
     ) -> None:
         self.endpoint, self.peer, self.session = endpoint, peer, session
         self.machine, self.report = machine, report
+        self.channel, self.alive = channel, alive
+        self.last_received = b""
 
     async def compute(self, step: Callable[[], T]) -> T:
         """Run one machine step.  On a clock that charges CPU (simulations) it runs inline
@@ -109,12 +123,53 @@ class _Party:
         self.report.cpu_s += spent
         return result
 
+    def _persists(self) -> bool:
+        """Whether to go on trying when the link gives up: the session is keyed (Bob counts
+        the run from his first reply on) and the peer is still heard -- a jammer, not a
+        drone gone.  The run's time limit (``_guard``) bounds it."""
+        keyed = self.channel is not None and self.channel.keyed
+        return keyed and self.alive is not None and self.alive()
+
     async def send(self, data: bytes, payload: int | None = None) -> None:
-        """Send ``data`` (``payload`` bytes of it the protocol's own; the rest authentication)."""
-        await self.endpoint.send(self.peer, self.session, data)
+        """Send ``data`` (``payload`` bytes of it the protocol's own; the rest authentication).
+        A sealed message the link gave up on goes again (a new copy) while
+        :meth:`_persists`, unless the peer's next message shows it arrived."""
+        while True:
+            try:
+                await self.endpoint.send(self.peer, self.session, data)
+                break
+            except LinkTimeout:
+                if not self._persists():
+                    raise
+                if self.endpoint.has_message(self.peer, self.session):
+                    break  # the peer answered it: it arrived, only the ACKs were lost
+                self.report.resent += 1
+                await self.endpoint.clock.sleep(RESEND_PAUSE_S)
         self.report.messages_sent += 1
         self.report.bytes_sent += len(data)
         self.report.auth_bytes_sent += len(data) - (len(data) if payload is None else payload)
+
+    async def receive(self) -> bytes:
+        """The peer's next message; a copy of the last one (sent again: our acknowledgement
+        was lost) is skipped."""
+        while True:
+            try:
+                message = await self.endpoint.receive(self.peer, self.session)
+            except LinkTimeout:
+                if not self._persists():
+                    raise
+                # a jammer: the peer is heard, its messages do not come through
+                await self.endpoint.clock.sleep(RESEND_PAUSE_S)
+                continue
+            if message != self.last_received:
+                self.last_received = message
+                return message
+
+    def abort(self, code: AbortCode) -> None:
+        """End the run here and tell the peer, with the session's proof once it is keyed."""
+        self.machine.abort()
+        proof = b"" if self.channel is None else self.channel.abort_proof(code)
+        self.endpoint.abort(self.peer, self.session, code, proof)
 
 
 async def _guard(party: _Party, run: Callable[[], Awaitable[None]], timeout: float | None) -> None:
@@ -123,28 +178,23 @@ async def _guard(party: _Party, run: Callable[[], Awaitable[None]], timeout: flo
         async with endpoint.clock.timeout(timeout):
             await run()
     except TimeoutError:
-        party.machine.abort()
-        endpoint.abort(peer, session, AbortCode.TIMEOUT)
+        party.abort(AbortCode.TIMEOUT)
         raise LinkTimeout(f"run with node {peer} exceeded its {timeout} s limit") from None
     except AuthenticationError:
-        party.machine.abort()
-        endpoint.abort(peer, session, AbortCode.AUTH)
+        party.abort(AbortCode.AUTH)
         raise
     except ProtocolError:
-        party.machine.abort()
-        endpoint.abort(peer, session, AbortCode.PROTOCOL)
+        party.abort(AbortCode.PROTOCOL)
         raise
     except (PeerAborted, PeerRefused):
         party.machine.abort()
         endpoint.close_session(peer, session)
         raise
     except LinkError:
-        party.machine.abort()
-        endpoint.abort(peer, session, AbortCode.LINK)
+        party.abort(AbortCode.LINK)
         raise
     except asyncio.CancelledError:
-        party.machine.abort()
-        endpoint.abort(peer, session, AbortCode.SHUTDOWN)
+        party.abort(AbortCode.SHUTDOWN)
         raise
     else:
         endpoint.close_session(peer, session)
@@ -160,16 +210,21 @@ async def run_alice(
     secure: Callable[[int], Initiator] | None = None,
     check_keys: Callable[[bytes, bytes], bool] | None = None,
     timeout: float | None = None,
+    alive: Callable[[], bool] | None = None,
 ) -> RunReport:
     """Open a session to ``peer`` (Bob) and run Alice to her result.
 
     ``secure(session)`` makes the run's authenticated session (the link session id is part of
     what it signs); ``check_keys(boot, public_keys)`` says whether what Bob's answer carries
-    (his per-start nonce and, paper suite, his public keys) is what his beacons announced."""
+    (his per-start nonce and, paper suite, his public keys) is what his beacons announced.
+    ``alive()``: whether Bob is still heard (a message the link gave up on goes again).
+    With a session, only Bob's proven abort (or signed refusal) ends the run."""
     session = endpoint.open(peer)
     report = RunReport(Role.ALICE, peer, session, endpoint.clock.now())
-    party = _Party(endpoint, peer, session, alice, report)
     channel = secure(session) if secure is not None else None
+    party = _Party(endpoint, peer, session, alice, report, channel, alive)
+    if channel is not None:
+        endpoint.secure(peer, session, channel.abort_checks)
 
     async def run() -> None:
         message: bytes | None = await party.compute(alice.start)
@@ -181,7 +236,7 @@ async def run_alice(
                 await party.send(channel.first(message), len(message))
             else:
                 await party.send(channel.seal(message), len(message))
-            reply = await endpoint.receive(peer, session)
+            reply = await party.receive()
             if channel is not None and first:
                 answer = channel.reply(reply)
                 if not isinstance(answer, Accepted):
@@ -211,19 +266,22 @@ async def serve_bob(
     boot: bytes = b"",
     timeout: float | None = None,
     first: bytes | None = None,
+    alive: Callable[[], bool] | None = None,
 ) -> RunReport:
     """Answer the session ``peer`` opened.  Its first message waits in the inbox, or was
     taken from it already and is passed as ``first`` -- with ``secure``, the HELLO inside the
     request the :class:`Responder` verified.  A hello naming an OT setup Bob does not hold
     is answered with a signed refusal (the peer starts a fresh setup)."""
     report = RunReport(Role.BOB, peer, session, endpoint.clock.now())
-    party = _Party(endpoint, peer, session, bob, report)
+    party = _Party(endpoint, peer, session, bob, report, secure, alive)
     pending = [first] if first is not None else []
+    if secure is not None:
+        endpoint.secure(peer, session, secure.abort_checks)  # verified: only Alice ends it
 
     async def run() -> None:
         opened = False
         while bob.state is not State.DONE:
-            message = pending.pop() if pending else await endpoint.receive(peer, session)
+            message = pending.pop() if pending else await party.receive()
             if secure is not None and opened:
                 message = secure.open(message)
             try:

@@ -20,6 +20,7 @@ from .beacon import Beacon
 from .roles import Role
 
 MAX_SPEED_M_S = 40.0  # no drone flies faster: beacon speeds are capped, boxes bounded by it
+TRACK_SLACK_M = 200.0  # position error a track allows on top of MAX_SPEED_M_S
 
 
 def distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
@@ -106,6 +107,10 @@ class Peer:
     measured: bool = False  # range_rate comes from two beacons
     made_at: float | None = None  # link time its beacon's position was taken (its stamp)
     met_at: float = 0.0  # link time it became a peer
+    # (link time, position) of its last position that its track makes plausible: within
+    # TRACK_SLACK_M plus MAX_SPEED_M_S since the anchor before.  A run's box is checked
+    # against it (companion.bob_answers), not against a claim out of nowhere.
+    anchor: tuple[float, tuple[int, int]] | None = None
 
     @property
     def position(self) -> tuple[int, int]:
@@ -141,6 +146,15 @@ class Peer:
             self.measured = True
             self.rate_from = (made, (beacon.lat, beacon.lon), gap)
         self.beacon, self.heard_at, self.made_at = beacon, now, made
+        here = (beacon.lat, beacon.lon)
+        if self.anchor is None or distance_m(self.anchor[1], here) <= self.reach_m(made):
+            self.anchor = (made, here)
+
+    def reach_m(self, now: float) -> float:
+        """How far from its anchor it may plausibly be at ``now`` (link time)."""
+        if self.anchor is None:
+            return 0.0
+        return TRACK_SLACK_M + MAX_SPEED_M_S * max(now - self.anchor[0], 0.0)
 
     def position_age(self, now: float) -> float:
         """Seconds since its position was taken."""

@@ -22,6 +22,11 @@ protocol's own first round trip, so authentication costs no extra radio turn:
 * Every AEAD's associated data is the running hash of everything before it (message 1, eB,
   every earlier ciphertext), so a forged, replayed, reordered or spliced message fails its
   tag: :class:`AuthenticationError`, and the run ends with no result.
+* An abort carries a proof that it is the peer's (:meth:`_Party.abort_proof`): once the keys
+  exist a 16-byte HMAC-SHA256 under a key derived from the sender's direction key; before,
+  an Ed25519 signature over the request's hash and the code (64 bytes).  Only the two
+  parties can end a run (the link ignores an ABORT without a proof that checks,
+  :meth:`companion.link.LinkEndpoint.secure`).
 * ``boot`` is the responder's per-start nonce; with his public protocol keys it is what his
   signed beacons' keys hash covers (:func:`companion.beacon.keys_hash`): the initiator checks
   the keys of the run against the keys he announced.
@@ -34,6 +39,7 @@ from __future__ import annotations
 
 import enum
 import hashlib
+import hmac
 import struct
 from dataclasses import dataclass
 
@@ -57,6 +63,7 @@ _INIT_HEAD = struct.Struct(f">B{FINGERPRINT_SIZE}sI{EPHEMERAL_SIZE}s{SIGNATURE_S
 INIT_OVERHEAD = _INIT_HEAD.size  # 109 bytes on the HELLO
 ACCEPT_OVERHEAD = 1 + EPHEMERAL_SIZE + SIGNATURE_SIZE + TAG_SIZE + BOOT_SIZE  # 129 bytes
 REFUSE_SIZE = 2 + SIGNATURE_SIZE
+ABORT_PROOF_SIZE = 16
 
 
 class AuthenticationError(RemoteProtocolError):
@@ -183,6 +190,7 @@ class _Channel:
 
     def __init__(self, send_key: bytes, receive_key: bytes, transcript: bytes) -> None:
         self._send, self._receive = ChaCha20Poly1305(send_key), ChaCha20Poly1305(receive_key)
+        self._abort_send, self._abort_receive = _abort_key(send_key), _abort_key(receive_key)
         self._sent = self._received = 0
         self._th = transcript
         self.failed = False
@@ -209,6 +217,22 @@ class _Channel:
         self._th = _h(self._th, bytes(data))
         return payload
 
+    def abort_proof(self, code: int) -> bytes:
+        return _abort_mac(self._abort_send, code)
+
+    def abort_checks(self, code: int, proof: bytes) -> bool:
+        return hmac.compare_digest(_abort_mac(self._abort_receive, code), bytes(proof))
+
+
+def _abort_key(direction_key: bytes) -> bytes:
+    return hmac.new(direction_key, CONTEXT + b"abort-key", hashlib.sha256).digest()
+
+
+def _abort_mac(key: bytes, code: int) -> bytes:
+    return hmac.new(key, CONTEXT + b"abort" + bytes([code]), hashlib.sha256).digest()[
+        :ABORT_PROOF_SIZE
+    ]
+
 
 class _Party:
     """Seal and open once the key exchange has made the session's channel."""
@@ -225,9 +249,47 @@ class _Party:
             raise AuthenticationError("no session yet")
         return self._channel.open(data)
 
+    @property
+    def keyed(self) -> bool:
+        """The key exchange is done: the run's messages are sealed from now on."""
+        return self._channel is not None
+
+    _th1: bytes
+    me: Identity
+    _signs_as: bytes  # what our signed aborts say we are: b"i" or b"r"
+
+    def abort_proof(self, code: int) -> bytes:
+        """What proves our abort of this session to the peer: the channel's MAC once the keys
+        exist, before them a signature over the request's hash and the code."""
+        if self._channel is not None:
+            return self._channel.abort_proof(code)
+        if not self._th1:
+            return b""
+        return self.me.key.sign(_abort_signed(self._signs_as, self._th1, code))
+
+    def abort_checks(self, code: int, proof: bytes) -> bool:
+        """Whether an abort's ``proof`` is the peer's (the channel's MAC, or the peer's
+        signature over the request's hash and the code)."""
+        if len(proof) == ABORT_PROOF_SIZE:
+            return self._channel is not None and self._channel.abort_checks(code, proof)
+        peer = self._peer_cert()
+        if len(proof) != SIGNATURE_SIZE or peer is None or not self._th1:
+            return False
+        theirs = b"r" if self._signs_as == b"i" else b"i"
+        return peer.drone.verify(bytes(proof), _abort_signed(theirs, self._th1, code))
+
+    def _peer_cert(self) -> Certificate | None:
+        raise NotImplementedError
+
+
+def _abort_signed(who: bytes, th1: bytes, code: int) -> bytes:
+    return CONTEXT + b"abort/" + who + th1 + bytes([code])
+
 
 class Initiator(_Party):
     """Alice's side: wraps her HELLO, checks Bob's answer, then seals and opens."""
+
+    _signs_as = b"i"
 
     def __init__(self, me: Identity, peer: Certificate, route: Route, unix_s: float) -> None:
         self.me, self.peer, self.route = me, peer, route
@@ -272,9 +334,14 @@ class Initiator(_Party):
         inner = self._channel.open(bytes(data[1 + EPHEMERAL_SIZE + SIGNATURE_SIZE :]))
         return Accepted(inner[:BOOT_SIZE], inner[BOOT_SIZE:])
 
+    def _peer_cert(self) -> Certificate | None:
+        return self.peer
+
 
 class Responder(_Party):
     """Bob's side: parses message 1, verifies it (before any protocol work), then answers."""
+
+    _signs_as = b"r"
 
     def __init__(self, me: Identity, init: Init, route: Route) -> None:
         self.me, self.init, self.route = me, init, route
@@ -302,6 +369,9 @@ class Responder(_Party):
         if not peer.drone.verify(init.signature, signed):
             raise AuthenticationError("request signature does not verify")
         self.peer = peer
+
+    def _peer_cert(self) -> Certificate | None:
+        return self.peer  # (only a verified requester's signed abort counts)
 
     def accept(self, boot: bytes, payload: bytes) -> bytes:
         if self.peer is None:

@@ -25,7 +25,8 @@ class LinkTimeout(LinkError):
 
 
 class PeerAborted(LinkError):
-    """The peer ended the session (ABORT frame, unauthenticated: end the run, nothing more)."""
+    """The peer ended the session (ABORT frame: end the run, nothing more; on a secured
+    session only with its proof, :meth:`LinkEndpoint.secure`)."""
 
     def __init__(self, code: AbortCode) -> None:
         super().__init__(f"peer aborted the session: {code.name.lower()} (code {code})")

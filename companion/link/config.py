@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from .airtime import LinkProfile
@@ -43,3 +44,6 @@ class Session:
     next_seq: int = 0
     aborted: PeerAborted | None = None
     arrived: float = 0.0  # accepted sessions: when the first fragment of the first message came
+    # A keyed session (:meth:`LinkEndpoint.secure`): an ABORT ends it only with a proof this
+    # says is the peer's; without one it is ignored (anybody can put an ABORT on the air).
+    abort_check: Callable[[int, bytes], bool] | None = None

@@ -14,6 +14,7 @@ import logging
 import math
 import random
 import secrets
+from collections.abc import Callable
 
 from ..tasks import spawn
 from .airtime import DutyCycle, LinkProfile
@@ -138,6 +139,7 @@ class LinkEndpoint:
         self._closed.pop((peer, session), None)
         self._aborted.pop((peer, session), None)
         self._sessions[(peer, session)] = Session(peer, session, self.clock.now())
+        self.receiver.trust(peer, session)  # ours: its replies are kept before anybody's
         return session
 
     async def accept(self, timeout: float | None = None) -> tuple[int, int]:
@@ -160,15 +162,28 @@ class LinkEndpoint:
         self._sessions.pop((peer, session), None)
         self._closed[(peer, session)] = self.clock.now()
         self.receiver.forget_session(peer, session)
+        self.receiver.untrust(peer, session)
 
-    def abort(self, peer: int, session: int, code: AbortCode) -> None:
+    def secure(self, peer: int, session: int, check: Callable[[int, bytes], bool]) -> None:
+        """The session is authenticated above the link: from now on an ABORT ends it only
+        with a proof ``check(code, proof)`` accepts -- one without is anybody's, ignored
+        (``unproven_abort``) -- and its partial messages are kept before anybody's."""
+        self._session(peer, session).abort_check = check
+        self.receiver.trust(peer, session)
+
+    def abort(self, peer: int, session: int, code: AbortCode, proof: bytes = b"") -> None:
         """Tell the peer the session is over (three copies, and again whenever it asks for an
-        ACK in this session) and close it here."""
-        frame = Frame(FrameType.ABORT, self.node, peer, session, payload=abort_payload(code))
+        ACK in this session) and close it here; ``proof``: that it is us (keyed sessions)."""
+        frame = Frame(FrameType.ABORT, self.node, peer, session, payload=abort_payload(code, proof))
         for _ in range(3 if self.radio.running else 0):
             self._enqueue(frame, control=True)
         self.close_session(peer, session)
         self._aborted[(peer, session)] = frame  # repeated to whoever still asks (like a RST)
+
+    def has_message(self, peer: int, session: int) -> bool:
+        """A message of the session waits to be received."""
+        sess = self._sessions.get((peer, session))
+        return sess is not None and not sess.inbox.empty()
 
     def busy(self, quiet_s: float = 2.0) -> bool:
         """A session is open, a message half received, or session traffic was heard in the
@@ -372,6 +387,10 @@ class LinkEndpoint:
             if entry is not None and entry[0].on_ack(frame):
                 entry[1].set()
         elif frame.type is FrameType.ABORT:
+            check = None if sess is None else sess.abort_check
+            if check is not None and not check(frame.payload[0], frame.payload[1:]):
+                self.stats.drop("unproven_abort")  # anybody's: the run goes on
+                return
             if sess is not None and sess.aborted is None:
                 sess.aborted = PeerAborted(AbortCode(frame.payload[0]))
                 sess.inbox.put_nowait(sess.aborted)

@@ -29,13 +29,14 @@ OVERHEAD = HEADER.size + CRC.size  # 16 bytes per frame
 BROADCAST = 0xFFFF
 MAX_ACK_BITMAP = 32  # bytes: an ACK can report 256 fragments beyond the cumulative point
 MAX_BEACON_FRAGMENTS = 8  # a beacon is one frame, or a few on a dwell-limited profile
+ABORT_PROOFS = (0, 16, 64)  # none, a keyed session's MAC, a signature (before the keys)
 
 
 class FrameType(enum.IntEnum):
     DATA = 1  # one fragment of a message
     ACK = 2  # selective acknowledgement: cumulative count + bitmap
     POLL = 3  # "send me your ACK for this message" (after a timeout)
-    ABORT = 4  # the session is over on the sender's side; payload: one reason code
+    ABORT = 4  # the session is over on the sender's side; payload: a code (and a proof)
     BEACON = 5  # periodic announcement (fragment index/count), payload opaque to the link
 
 
@@ -129,7 +130,7 @@ def decode_frame(data: bytes, max_size: int = PHY_MAX_FRAME) -> Frame:
     if kind is FrameType.POLL and (payload or index):
         raise FrameError("fields", "POLL carries no payload")
     if kind is FrameType.ABORT and (
-        len(payload) != 1 or payload[0] not in AbortCode._value2member_map_
+        len(payload) - 1 not in ABORT_PROOFS or payload[0] not in AbortCode._value2member_map_
     ):
         raise FrameError("fields", "ABORT payload")
     if kind is FrameType.BEACON and (not payload or count > MAX_BEACON_FRAGMENTS):
@@ -180,5 +181,9 @@ class AckInfo:
         return got
 
 
-def abort_payload(code: AbortCode) -> bytes:
-    return bytes([code])
+def abort_payload(code: AbortCode, proof: bytes = b"") -> bytes:
+    """A code, and for an authenticated session the proof that its sender ends it (16 or 64
+    bytes, :meth:`companion.auth.session._Party.abort_proof`)."""
+    if len(proof) not in ABORT_PROOFS:
+        raise ValueError(f"an abort proof is one of {ABORT_PROOFS[1:]} bytes")
+    return bytes([code]) + proof

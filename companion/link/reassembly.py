@@ -5,6 +5,17 @@ Fragments are stored as they arrive (nothing is allocated from a claimed size), 
 Partial messages that hear nothing for ``idle_timeout`` seconds are dropped and their memory
 freed.
 
+Anybody can put a first fragment on the air, so room is kept for those who proved who they
+are: the sessions the layer above *trusts* (:meth:`Receiver.trust`: ours, and a peer's once
+its request authenticated).  When ``max_partial`` partial messages are held, a new one takes
+the place of the untrusted partial heard from longest ago; a trusted one is never evicted
+for an untrusted one.  A flood of forged first fragments then costs its sender airtime and
+evicts only its own kind: a genuine message, whose fragments come in bursts, is evicted only
+if ``max_partial`` forged frames fit between two of its fragments (its sender's next burst
+begins it again).  Before, a full store refused every new message until ``idle_timeout``
+(5 minutes on US915, 3 hours on EU868): eight forged frames made a drone deaf.  What it
+remembers of delivered streams is bounded the same way (``max_streams``, untrusted first).
+
 Delivery is at most once and in order per *stream* (source, session): a sender has one
 message of a session in flight at a time and numbers them (``seq``, mod 256), so the receiver
 remembers, per stream, the last message it delivered.  Later copies of that message's
@@ -84,14 +95,17 @@ class Receiver:
         max_message: int = 1 << 20,
         max_partial: int = 8,
         idle_timeout: float = 120.0,
+        max_streams: int = 256,
     ) -> None:
         self.node = node
         self.max_message = max_message
         self.max_partial = max_partial
+        self.max_streams = max_streams
         self.idle_timeout = idle_timeout
         self.stats = ReceiverStats()
         self._partial: dict[Key, _Partial] = {}
         self._streams: dict[StreamKey, _Stream] = {}
+        self._trusted: set[StreamKey] = set()
         self._epoch = secrets.randbelow(255) + 1  # of the last partial copy begun
 
     @property
@@ -131,7 +145,7 @@ class Receiver:
                 return None, None
             if len(self._partial) >= self.max_partial:
                 self.expire(now)
-            if len(self._partial) >= self.max_partial:
+            if len(self._partial) >= self.max_partial and not self._evict(key[:2]):
                 self.stats.refuse("too_many_partial")
                 return None, None
             partial = self._partial[key] = _Partial(
@@ -154,7 +168,7 @@ class Receiver:
         if len(partial.fragments) == partial.count:
             del self._partial[key]
             data = b"".join(partial.fragments[i] for i in range(partial.count))
-            self._streams[key[:2]] = _Stream(frame.seq, partial.count, now)
+            self._remember(key[:2], _Stream(frame.seq, partial.count, now))
             for older in [k for k in self._partial if k[:2] == key[:2]]:
                 del self._partial[older]  # abandoned by its sender (it moved on): stale
             self.stats.delivered += 1
@@ -163,6 +177,33 @@ class Receiver:
         if frame.flags & Flag.ACK_REQ:
             return None, self._ack(frame, self._info(partial))
         return None, None
+
+    def trust(self, src: int, session: int) -> None:
+        """The session is authenticated (or ours): keep its partial messages before others."""
+        self._trusted.add((src, session))
+
+    def untrust(self, src: int, session: int) -> None:
+        self._trusted.discard((src, session))
+
+    def _evict(self, newcomer: StreamKey) -> bool:
+        """Make room for a partial message of ``newcomer``: drop the untrusted partial heard
+        from longest ago (a trusted newcomer may also take an untrusted one's place, an
+        untrusted one never a trusted one's).  False: none may go."""
+        untrusted = [k for k in self._partial if k[:2] not in self._trusted]
+        if not untrusted:
+            return False
+        oldest = min(untrusted, key=lambda k: self._partial[k].last_heard)
+        del self._partial[oldest]
+        self.stats.refuse("evicted")
+        return True
+
+    def _remember(self, stream: StreamKey, last: _Stream) -> None:
+        """Remember what a stream delivered, within ``max_streams`` (the untrusted stream
+        heard from longest ago goes first: forged one-frame messages cannot fill memory)."""
+        self._streams[stream] = last
+        while len(self._streams) > self.max_streams:
+            untrusted = [k for k in self._streams if k not in self._trusted] or list(self._streams)
+            del self._streams[min(untrusted, key=lambda k: self._streams[k].last_heard)]
 
     def _next_epoch(self) -> int:
         """Epochs go round 1..255 (0 means "holds none"), so a copy begun again differs from

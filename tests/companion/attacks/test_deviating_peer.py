@@ -97,6 +97,52 @@ def test_a_box_away_too_large_or_too_fine_is_refused_before_any_work(
     assert [e["reason"] for e in w.events(2, "refused")] == ["BOX"]
 
 
+@pytest.mark.parametrize(
+    ("jump", "wait_s", "answered"),
+    [
+        ((474_461_000, 85_455_940), 5.0, False),  # 5 km north, 10 s after the last beacon
+        ((474_461_000, 85_455_940), 130.0, True),  # the same, 2 minutes later: 40 m/s flies it
+        ((478_511_000, 85_455_940), 5.0, False),  # 50 km north: beyond any track, and radio
+    ],
+    ids=["5-km-jump", "5-km-flown", "50-km"],
+)
+def test_a_box_at_a_beacon_that_jumped_is_refused(
+    tmp_path: Path,
+    monkeypatch: Any,
+    jump: tuple[int, int],
+    wait_s: float,
+    answered: bool,
+) -> None:
+    """D7, by the track: the prober's signed beacons put it here, then one signed beacon puts
+    it where it wants to probe, and it asks for a box centred there.  Before, Bob checked the
+    box against her last beacon only and answered.  Now her box must be where her track of
+    beacons makes plausible (200 m, plus 40 m/s since the track's last plausible point) and
+    within 30 km of Bob: a jump no drone can fly is refused (signed, BOX) before any work; the
+    same place reached at a plausible speed is answered."""
+    built = count_bobs(monkeypatch)
+
+    async def main() -> tuple[World, Any]:
+        w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
+        rogue = await w.rogue(9)
+        await rogue.announce(w, HERE, size_class=2)
+        await w.clock.sleep(wait_s)
+        await rogue.announce(w, jump, size_class=2)
+        grid = GridSpec.geo(*jump, radius_m=2000.0)
+        try:
+            outcome: Any = await rogue.compare(w, 2, ((0, 0), (10, 0), (10, 10)), grid)
+        except PeerRefused as exc:
+            outcome = exc
+        await w.stop()
+        return w, outcome
+
+    w, outcome = run_simulated(main())
+    if answered:
+        assert not isinstance(outcome, Exception) and len(built) == 1
+    else:
+        assert isinstance(outcome, PeerRefused) and outcome.code is Refusal.BOX and not built
+        assert [e["reason"] for e in w.events(2, "refused")] == ["BOX"]
+
+
 def test_an_honest_box_beyond_the_peers_limit_is_refused_and_said_so(tmp_path: Path) -> None:
     """The other side of D7's limits: an honest drone whose path needs a larger box than its
     peer answers in is refused (signed, BOX), never applies a result, and its failed run says

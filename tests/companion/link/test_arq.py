@@ -116,7 +116,51 @@ def test_forged_counts_allocate_nothing_and_partials_are_bounded() -> None:
         frame = Frame(FrameType.DATA, 1, 2, 7, seq, 0, 0xFFFF, b"x")
         receiver.on_frame(frame, 0.0)
     assert receiver.pending() == 4 and receiver.buffered_bytes == 4
-    assert receiver.stats.refused["too_many_partial"] == 6
+    assert receiver.stats.refused["evicted"] == 6  # the oldest forged ones made room
+
+
+def test_a_flood_of_first_fragments_evicts_only_the_untrusted() -> None:
+    """Partial messages of trusted sessions (ours, authenticated) stay whatever a flood of
+    forged first fragments brings; an untrusted message whose fragments keep coming is the
+    last of the untrusted to go; when only trusted partials are held a newcomer is refused."""
+    receiver = Receiver(2, max_partial=4)
+    receiver.trust(1, 7)
+    mine = Outgoing(1, 2, 7, 0, bytes(300), 100)
+    theirs = Outgoing(3, 2, 9, 0, bytes(300), 100)
+    first, second, third = mine.burst()
+    receiver.on_frame(first, 0.0)
+    forged = (Frame(FrameType.DATA, 100 + k, 2, 5, 0, 0, 200, b"x") for k in range(1000))
+    for k in range(50):  # forged first fragments of made-up messages, from made-up nodes
+        receiver.on_frame(next(forged), 1.0 + k)
+    assert receiver.on_frame(second, 60.0)[0] is None
+    delivered, _ = receiver.on_frame(third, 61.0)
+    assert delivered is not None and delivered.data == bytes(300)
+    # An untrusted message (a request not yet checked) survives forged frames between its
+    # fragments as long as fewer than max_partial of them fit between two of its fragments.
+    t = 100.0
+    delivered = None
+    for fragment in theirs.burst():
+        t += 0.1
+        delivered = receiver.on_frame(fragment, t)[0] or delivered
+        for _ in range(3):
+            t += 0.1
+            receiver.on_frame(next(forged), t)
+    assert delivered is not None and delivered.data == bytes(300)
+    full = Receiver(2, max_partial=2)
+    for session in (1, 2):
+        full.trust(1, session)
+        full.on_frame(Frame(FrameType.DATA, 1, 2, session, 0, 0, 3, b"x"), 0.0)
+    assert full.on_frame(Frame(FrameType.DATA, 9, 2, 1, 0, 0, 3, b"x"), 1.0) == (None, None)
+    assert full.pending() == 2 and full.stats.refused["too_many_partial"] == 1
+
+
+def test_remembered_streams_are_bounded() -> None:
+    receiver = Receiver(2, max_streams=8)
+    receiver.trust(1, 1)
+    receiver.on_frame(Frame(FrameType.DATA, 1, 2, 1, 0, 0, 1, b"m"), 0.0)
+    for k in range(100):  # forged one-frame messages, each a stream of its own
+        receiver.on_frame(Frame(FrameType.DATA, 100 + k, 2, 5, 0, 0, 1, b"x"), 1.0 + k)
+    assert len(receiver._streams) == 8 and (1, 1) in receiver._streams
 
 
 def test_finished_messages_answer_late_polls_with_complete() -> None:

@@ -147,11 +147,16 @@ def test_ack_bitmap_reports_exactly_what_fits(count: int, data: st.DataObject) -
 
 
 def test_aborts_carry_one_code_and_nothing_else() -> None:
-    """No text, nothing secret: an ABORT is one byte from a fixed set."""
+    """No text, nothing secret: an ABORT is one byte from a fixed set, and in a keyed session
+    a proof that its sender is the peer (a 16-byte MAC, or before the keys a signature)."""
     for code in AbortCode:
         frame = Frame(FrameType.ABORT, 1, 2, 7, payload=abort_payload(code))
         assert decode_frame(frame.encode()).payload == bytes([code])
-    for payload in (b"", b"\x01text", b"\x00", b"\x63"):
+        proven = Frame(FrameType.ABORT, 1, 2, 7, payload=abort_payload(code, bytes(range(16))))
+        assert decode_frame(proven.encode()).payload == bytes([code, *range(16)])
+    with pytest.raises(ValueError, match="proof"):
+        abort_payload(AbortCode.AUTH, b"short")
+    for payload in (b"", b"\x01text", b"\x00", b"\x63", b"\x01" + bytes(15), b"\x01" + bytes(17)):
         with pytest.raises(FrameError, match="ABORT"):
             decode_frame(Frame(FrameType.ABORT, 1, 2, 7, payload=payload).encode())
 
