@@ -27,7 +27,7 @@ from protocol.wire import Suite
 from .auth.certificate import Certificate
 from .auth.session import AuthenticationError, Initiator, Refusal, Route
 from .beacon import keys_hash
-from .budget import ALICE, BudgetExceeded
+from .budget import ALICE, MAX_RUN_WORK, BudgetExceeded, run_work
 from .edits import Edits
 from .events import EventKind
 from .exchange import PeerRefused, run_alice
@@ -277,8 +277,9 @@ class AliceRuns(Edits):
         late for the first -- later than we enter it, and than the peer could be here -- and
         a smaller one would not: then the most, in powers of two, that come in time (at least
         two).  The next run takes the rest at once: the full run goes in parts, the urgent
-        part first.  On the ground (nothing is urgent) all of them."""
-        segments = len(path) - 1
+        part first.  On the ground (nothing is urgent) all of them.  Never more than the peer
+        answers (:meth:`_most_segments`)."""
+        segments = min(len(path) - 1, self._most_segments(peer, path))
         if self.on_ground or segments <= 2:
             return segments
         schedule = self._schedule(self.original, self.path, start, self.original_current)
@@ -295,6 +296,16 @@ class AliceRuns(Edits):
             m //= 2
         return min(m, segments)
 
+    def _most_segments(self, peer: Peer, path: list[tuple[int, int]]) -> int:
+        """The most segments of ``path`` one run may take: what the peer answers
+        (:data:`companion.budget.MAX_RUN_WORK`, with its size class and our grid)."""
+        n = Limits().padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        grid = self._grid(path)
+        m = MAX_SEGMENTS
+        while m > 1 and run_work(m, n, grid.range) > MAX_RUN_WORK:
+            m //= 2
+        return m
+
     async def _run(self, peer: Peer, phase: str, horizon: int) -> bool:
         """One run; True when it ended with a result (or had nothing to compare)."""
         start, path = self._remaining_path()
@@ -310,6 +321,7 @@ class AliceRuns(Edits):
                 start, path = start + skip, near_cut(path[skip:], max(left, 1.0), least=2)
             else:
                 path = self._near(path, horizon)
+            path = path[: self._most_segments(peer, path) + 1]
         else:
             skip = self._decided_by_near(peer, start, path)
             start, path = start + skip, path[skip:]

@@ -13,8 +13,6 @@ import logging
 import math
 import random
 
-from protocol.intersection import MAX_SEGMENTS, Limits
-
 from .auth.trust import UnknownPeers
 from .beacon import Beacon, CertBeacon, size_class
 from .core import ASK_BACKOFF_S
@@ -48,8 +46,7 @@ class Beaconing(Edits):
         """Our position beacon (:mod:`companion.beacon`): signed when one is due (it carries
         our beacon key and keys hash), else tagged for every neighbour we share a key with."""
         lat, lon, alt = self.position
-        _, path = self._remaining_path()
-        segments = Limits().padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
+        segments = self._own_size()
         time_s, counter = self._stamp()
         beacon = Beacon(
             lat,

@@ -21,7 +21,7 @@ from protocol.wire import Hello
 
 from .auth.session import AuthenticationError, Init, Refusal, Responder, Route
 from .beacon import MAX_SIZE_CLASS
-from .budget import BOB, BudgetExceeded
+from .budget import BOB, MAX_RUN_WORK, BudgetExceeded, run_work
 from .core import CompanionCore
 from .events import EventKind
 from .exchange import serve_bob
@@ -217,6 +217,11 @@ class BobAnswers(CompanionCore):
         operator = neighbour.operator
         allowed = min(operator.max_segments, 1 << min(known.beacon.size_class, MAX_SIZE_CLASS))
         if hello.m > allowed:  # more than its beacon announced or its operator allows
+            await self._refuse(peer, session, responder, Refusal.SIZE)
+            return None
+        if run_work(hello.m, self._own_size(), hello.grid.range) > MAX_RUN_WORK:
+            # More than a fair run (m x n x grid bits): Bob's CPU, memory and first reply
+            # grow with it, and a refused run costs the asker nothing.
             await self._refuse(peer, session, responder, Refusal.SIZE)
             return None
         if not self._plausible_box(hello, known):

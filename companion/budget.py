@@ -4,10 +4,12 @@ Alice learns one bit per segment per run; with many runs she could trace Bob's p
 budget counts the runs we answer (as Bob) over a sliding window, on disk
 (:class:`StateStore`), per *certified* drone, per operator and in all -- never per node id or
 anything else a peer only claims -- and every limit holds across restarts.  A run that ends
-before Bob's last message (which alone opens Alice's answer) taught Alice nothing and is
-given back: a jammer or a forged abort cannot use up a drone's runs.  The runs we start (as
-Alice) are counted apart, per drone, and given back when they bring no result, so that a
-fault cannot make us call a peer without end (failed runs are retried after a pause).
+before Bob's first reply taught Alice nothing and is given back; from that reply on (it
+shows his padded size n) it counts, and an outsider cannot make it end without an answer
+(aborts carry the session's proof; a keyed run outlasts a jammer: :mod:`companion.exchange`).
+The runs we start (as Alice) are counted apart, per drone, and given back when they bring no
+result, so that a fault cannot make us call a peer without end (failed runs are retried
+after a pause).
 """
 
 from __future__ import annotations
@@ -19,6 +21,22 @@ from .roles import Role
 from .state import StateStore
 
 ALICE, BOB = Role.ALICE, Role.BOB
+
+
+# The work one run may ask of Bob: (Alice's padded segments m) x (Bob's padded size n, from
+# his own remaining path: public in his beacons) x (bits of the grid's range).  Bytes, CPU
+# and memory of a run grow with it (docs/benchmarks.md, "Bob's work per request"): at this
+# bound a run is about 240 KB, Bob's largest message about 110 KB (the link takes 1 MiB), his
+# CPU about 2.2 s and the process's peak memory about 200 MB (single runs, both parties in
+# one process); the largest request the other limits admit (256 x 16 at 20 bits, 20 times
+# this) cost Bob 28.9 s and 1.28 GB (quoted from issue 27).  An honest Alice cuts her runs
+# to it (a full run goes in parts); a request above it is refused (SIZE) before any work.
+MAX_RUN_WORK = 16 * 16 * 16
+
+
+def run_work(m: int, n: int, grid_range: int) -> int:
+    """What a run of m x n segments on a grid of ``grid_range`` cells asks of Bob."""
+    return m * n * max(grid_range, 1).bit_length()
 
 
 class Scope(enum.Enum):

@@ -23,7 +23,7 @@ from typing import Any
 
 from protocol.compact_plan import message_sizes
 from protocol.grid import GridSpec
-from protocol.intersection import Alice, BobKeys
+from protocol.intersection import MAX_SEGMENTS, Alice, BobKeys, Limits
 from protocol.ot.setup import DEFAULT_SECURITY, ChooserSetup, HolderSetup
 from protocol.volumes import CROSSING, VolumeSpec
 from protocol.wire import Suite
@@ -657,6 +657,11 @@ class CompanionCore:
         if self.settings.suite is not Suite.COMPACT:
             return CROSSING
         return run_volumes(self.settings.separation, grid.resolution_mm, epoch_s)
+
+    def _own_size(self) -> int:
+        """Our remaining path's padded size (our beacons' size class; as Bob, at most n)."""
+        _, path = self._remaining_path()
+        return Limits().padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
 
     def _slots(self) -> Slots:
         """The altitude slots the rest of our flight occupies, as the vehicle flies it.  They

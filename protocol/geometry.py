@@ -143,23 +143,23 @@ def circuit_with_line(
 FPoint = tuple[Fraction, Fraction]
 
 
-def _clip(p: Point, q: Point, r: int) -> tuple[FPoint, FPoint] | None:
-    """Liang-Barsky: the part of segment pq inside [-r, r]^2, exactly (None if none)."""
+def _clip(p: Point, q: Point, r: int) -> tuple[bool, FPoint, FPoint]:
+    """Liang-Barsky: the part of segment pq inside [-r, r]^2, exactly, and whether there is
+    one.  The same work whether or not the segment meets the box (no early exit: Bob's time
+    must not tell where his path lies); outside, the points are meaningless."""
     t0, t1 = Fraction(0), Fraction(1)
     dx, dy = q[0] - p[0], q[1] - p[1]
+    outside = False
     for step, room in ((-dx, p[0] + r), (dx, r - p[0]), (-dy, p[1] + r), (dy, r - p[1])):
-        if step == 0:
-            if room < 0:
-                return None
-            continue
-        t = Fraction(room, step)
+        t = Fraction(room, step or 1)
+        outside |= step == 0 and room < 0
         if step < 0:
             t0 = max(t0, t)
-        else:
+        elif step > 0:
             t1 = min(t1, t)
-        if t0 > t1:
-            return None
-    return (p[0] + t0 * dx, p[1] + t0 * dy), (p[0] + t1 * dx, p[1] + t1 * dy)
+    # t0 only grows and t1 only shrinks: crossed at any step is crossed at the end
+    outside |= t0 > t1
+    return not outside, (p[0] + t0 * dx, p[1] + t0 * dy), (p[0] + t1 * dx, p[1] + t1 * dy)
 
 
 def _round_in(point: FPoint, r: int) -> Point:
@@ -233,7 +233,9 @@ def fit_to_box(
     :class:`BobPath`), so the answer inside the box is that of the uncut path.  Whatever
     does not fit into n segments makes the answer *meets everywhere*; a path with nothing in
     the box is a link at a corner, which meets nothing.  ``bands`` and ``windows`` (one per
-    segment of ``path``) follow the pieces.
+    segment of ``path``) follow the pieces.  Every segment costs the same clipping and
+    rounding whether it lies in the box or not: how long Bob takes does not tell Alice where
+    his path lies.
     """
     if n < 1:
         raise ValueError("a path has at least one segment")
@@ -241,10 +243,10 @@ def fit_to_box(
     links: set[int] = set()
     owner: list[int] = []  # per kept segment: the segment of ``path`` it comes from
     for s, (p, q) in enumerate(itertools.pairwise(path)):
-        part = _clip(p, q, r)
-        if part is None:
+        inside, fa, fb = _clip(p, q, r)
+        a, b = _round_in(fa, r), _round_in(fb, r)  # (rounded either way: the same work)
+        if not inside:
             continue
-        a, b = _round_in(part[0], r), _round_in(part[1], r)
         if points and points[-1] != a:
             links.add(len(points) - 1)
             points.append(a)

@@ -103,3 +103,22 @@ def test_a_state_directory_from_before_the_bit_budget_is_upgraded(tmp_path: Path
     assert store.count_runs(0.0, BOB) == 1 and store.count_runs(0.0, BOB, bits=True) == 0
     store.record_run(2.0, b"d", b"o", BOB, bits=16)
     assert store.count_runs(0.0, BOB, drone=b"d", bits=True) == 16
+
+
+@pytest.mark.parametrize(("m", "n"), [(64, 4), (16, 16), (4, 64)])
+def test_a_run_at_the_work_bound_fits_the_link(m: int, n: int) -> None:
+    """The work bound (m x n x grid bits) keeps every message of an admitted run -- Bob's
+    first reply above all -- well inside the link's largest message, whatever its shape; the
+    largest request the old limits admitted (256 x 16 on a 64 km box at 100 mm: 20 bits) is
+    far beyond it."""
+    from companion.budget import MAX_RUN_WORK, run_work
+    from companion.link.config import LinkConfig
+    from protocol.compact_plan import message_sizes
+    from protocol.grid import GridSpec
+
+    grid = GridSpec(range=(1 << 16) - 1)  # 16 bits: a 64 km box at 2 m
+    assert run_work(m, n, grid.range) == MAX_RUN_WORK
+    sizes = message_sizes(m, n, grid, fresh_setup=True)
+    assert max(size for _, size in sizes) < LinkConfig().max_message // 2
+    old = GridSpec.geo(474_011_000, 85_455_940, radius_m=64_000, resolution_mm=100)
+    assert run_work(256, 16, old.range) > 4 * MAX_RUN_WORK

@@ -169,3 +169,35 @@ def test_links_and_the_fallback_in_the_circuit() -> None:
     squeezed = fit_to_box(v, 100, 2)  # the public size of a two-segment path
     assert squeezed.everywhere and squeezed.hits(alice) == [True, True]
     assert fit_to_box([(500, 500), (600, 500)], 100, 2).hits(alice) == [False, False]
+
+
+def test_fitting_to_the_box_costs_the_same_wherever_the_path_lies(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Bob fits his path to Alice's box before his first reply: the same clipping and
+    rounding per segment whether it lies in the box or not (before, a segment outside
+    skipped the rounding: 1.0 ms for a path outside, 4.5 ms inside, measured by a prober)."""
+    from fractions import Fraction
+
+    import protocol.geometry as geometry
+
+    calls: list[str] = []
+    real_round, real_fraction = geometry._round_in, Fraction
+
+    def counting_round(point: tuple[Fraction, Fraction], r: int) -> tuple[int, int]:
+        calls.append("round")
+        return real_round(point, r)
+
+    def counting_fraction(*args: int) -> Fraction:
+        calls.append("fraction")
+        return real_fraction(*args)
+
+    monkeypatch.setattr(geometry, "_round_in", counting_round)
+    monkeypatch.setattr(geometry, "Fraction", counting_fraction)
+    inside = [(-900 + 200 * k, (-1) ** k * 300) for k in range(9)]
+    work = {}
+    for name, path in (("inside", inside), ("outside", [(x + 5000, y) for x, y in inside])):
+        calls.clear()
+        geometry.fit_to_box(path, 1000, 8)
+        work[name] = sorted(calls)
+    assert work["inside"] == work["outside"] and work["inside"].count("round") == 16

@@ -243,12 +243,18 @@ class Rogue:
         await w.clock.sleep(5)
 
     async def compare(
-        self, w: World, victim: int, path: tuple[Point, ...], grid: GridSpec
+        self,
+        w: World,
+        victim: int,
+        path: tuple[Point, ...],
+        grid: GridSpec,
+        machine: type[Alice] = Alice,
     ) -> tuple[RunReport, list[int]]:
-        """A whole run as Alice (the real machine, the real session) against ``victim``;
-        its report and the sizes of the victim's messages as they went on the air."""
+        """A whole run as Alice (the real machine, or a ``machine`` of the attacker's, and
+        the real session) against ``victim``; its report and the sizes of the victim's
+        messages as they went on the air."""
         victim_cert = w.credentials[victim].identity.cert
-        alice = Alice(path, grid)
+        alice = machine(path, grid)
         start = len(w.sniffer.frames)
 
         def secure(session: int) -> Initiator:

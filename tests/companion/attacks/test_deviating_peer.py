@@ -143,6 +143,47 @@ def test_a_box_at_a_beacon_that_jumped_is_refused(
         assert [e["reason"] for e in w.events(2, "refused")] == ["BOX"]
 
 
+def test_a_run_ended_after_bobs_first_reply_counts(tmp_path: Path) -> None:
+    """D8: Bob's first reply shows his padded size n (in a near run, the bucket of his
+    segments within the horizon Alice picked).  A certified Alice who ends each run as soon
+    as she has it -- 42 such runs told one her distances to Bob's vertices 2, 4 and 8 within
+    1 m -- was refunded every time, her budget untouched.  Now a run counts from Bob's first
+    reply on: three such runs spend three of her runs, and her fourth ... ninth are refused
+    once the hour's budget (8) is used up."""
+    from protocol.errors import ProtocolError
+    from protocol.intersection import Alice
+
+    class Quits(Alice):
+        def receive(self, data: bytes) -> bytes | None:
+            if self.n is None:
+                super().receive(data)
+                raise ProtocolError("n seen: the prober ends the run")
+            return super().receive(data)
+
+    async def main() -> tuple[int, list[str]]:
+        w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
+        rogue = await w.rogue(9)
+        await rogue.announce(w, HERE, size_class=2)
+        grid = GridSpec.geo(*HERE, radius_m=2000.0)
+        ends = []
+        for _ in range(9):
+            try:
+                await rogue.compare(w, 2, ((0, 0), (10, 0), (10, 10)), grid, machine=Quits)
+                ends.append("result")
+            except PeerRefused as exc:
+                ends.append(exc.code.name)
+            except ProtocolError:
+                ends.append("quit")
+            await w.clock.sleep(10)
+        counted = w.drones[2].store.count_runs(0, "bob")
+        await w.stop()
+        return counted, ends
+
+    counted, ends = run_simulated(main())
+    assert ends == ["quit"] * 8 + ["BUDGET"], ends
+    assert counted == 8
+
+
 def test_an_honest_box_beyond_the_peers_limit_is_refused_and_said_so(tmp_path: Path) -> None:
     """The other side of D7's limits: an honest drone whose path needs a larger box than its
     peer answers in is refused (signed, BOX), never applies a result, and its failed run says

@@ -235,6 +235,43 @@ def test_an_oversized_request_is_refused_before_any_work(tmp_path: Path, monkeyp
     assert not built and [e["reason"] for e in w.events(2, "refused")] == ["SIZE", "SIZE"]
 
 
+def test_a_request_beyond_a_fair_run_is_refused_before_any_work(
+    tmp_path: Path, monkeypatch: Any
+) -> None:
+    """The largest request the limits used to admit -- 256 segments (what its beacon
+    announces and its operator allows) on a 64 km box at 100 mm -- cost Bob about 29 s of
+    CPU and 1.3 GB, and its 1.3 MB first reply could not cross the link.  Bob now bounds the
+    work of one run (m x his size x grid bits, budget.MAX_RUN_WORK) and refuses it (signed,
+    SIZE) before he builds anything; the same path cut to the bound is answered."""
+    from companion.budget import MAX_RUN_WORK, run_work
+
+    built = count_bobs(monkeypatch)
+
+    async def main() -> tuple[World, list[Any]]:
+        w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
+        rogue = await w.rogue(9)
+        here = (474_011_000, 85_455_940)
+        await rogue.announce(w, here, size_class=8)
+        outcomes: list[Any] = []
+        for segments, radius_m, resolution_mm in ((256, 64_000.0, 100), (16, 2_000.0, 2000)):
+            grid = GridSpec.geo(*here, radius_m=radius_m, resolution_mm=resolution_mm)
+            n = w.drones[2]._own_size()
+            outcomes.append(run_work(segments, n, grid.range) > MAX_RUN_WORK)
+            path = tuple((k, k % 2) for k in range(segments + 1))
+            try:
+                outcomes.append(await rogue.compare(w, 2, path, grid))
+            except Exception as exc:
+                outcomes.append(exc)
+        await w.stop()
+        return w, outcomes
+
+    w, (over, huge, within, fair) = run(main())
+    assert over and not within
+    assert type(huge).__name__ == "PeerRefused" and huge.code.name == "SIZE"
+    assert not isinstance(fair, Exception) and len(built) == 1
+    assert [e["reason"] for e in w.events(2, "refused")] == ["SIZE"]
+
+
 def test_a_forged_refusal_changes_nothing_but_the_run(tmp_path: Path) -> None:
     """Drone 2's answer replaced by a refusal "I am Alice" (a made-up signature): the run
     fails, drone 1 keeps its role (a forged refusal must not make it yield and stop
@@ -380,10 +417,11 @@ def test_forged_aborts_end_no_run_and_spend_nothing(tmp_path: Path) -> None:
                             await w.inject(abort.encode())
 
         task = asyncio.create_task(attacker())
-        for _ in range(6):  # drone 1 compares again and again
+        for i in range(6):  # drone 1 compares again and again, a run every 300 s
+            if i:
+                peer = w.drones[1].peers[2]
+                peer.compared, peer.plan = None, []
             await w.clock.sleep(300)
-            peer = w.drones[1].peers[2]
-            peer.compared, peer.plan = None, []
         stop = True
         await task
         counted = w.drones[2].store.count_runs(0, "bob")
