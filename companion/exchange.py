@@ -16,8 +16,9 @@ Nobody else can end or spend a run: the link ignores an abort without the sessio
 its MAC).  Once keyed, while ``alive()`` says the peer is still heard, a message the link
 gave up on (a jammer) is sent again until the peer has it, and silence is waited out, within
 the run's time limit -- Bob counts a run from his first reply on, and what he computed
-reaches Alice unless every copy is jammed for that long.  A copy received again is no news
-and is skipped.
+reaches Alice unless every copy is jammed for that long.  Alice ends a keyed run with a
+sealed empty message; until it comes Bob sends his last message again (an acknowledgement
+is anybody's to forge).  A copy received again is no news and is skipped.
 
 Without a session object (``secure=None``) the messages travel in the clear: benchmarks use it
 to measure what authentication adds; the companion never does.
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
@@ -48,6 +50,8 @@ T = TypeVar("T")
 # event loop's default pool, and a step queued behind them would wait for seconds.
 _WORKERS = concurrent.futures.ThreadPoolExecutor(max_workers=2, thread_name_prefix="protocol")
 RESEND_PAUSE_S = 5.0  # before a sealed message the link gave up on goes again
+QUIET_S = 30.0  # a keyed run's silence (at least) before our last message goes again
+END_TRIES = 3  # Bob sends his last message again at most this often for Alice's end
 
 
 class PeerRefused(Exception):
@@ -96,6 +100,7 @@ class _Party:
         self.machine, self.report = machine, report
         self.channel, self.alive = channel, alive
         self.last_received = b""
+        self.last_sent = b""  # once keyed: sent again when the peer stays silent
 
     async def compute(self, step: Callable[[], T]) -> T:
         """Run one machine step.  On a clock that charges CPU (simulations) it runs inline
@@ -130,10 +135,14 @@ class _Party:
         keyed = self.channel is not None and self.channel.keyed
         return keyed and self.alive is not None and self.alive()
 
-    async def send(self, data: bytes, payload: int | None = None) -> None:
-        """Send ``data`` (``payload`` bytes of it the protocol's own; the rest authentication).
-        A sealed message the link gave up on goes again (a new copy) while
-        :meth:`_persists`, unless the peer's next message shows it arrived."""
+    async def send(
+        self, data: bytes, payload: int | None = None, *, copy: bool = False, end: bool = False
+    ) -> None:
+        """Send ``data`` (``payload`` bytes of it the protocol's own; the rest authentication;
+        ``copy``: our last message again, not counted; ``end``: the sealed end of a run, its
+        bytes counted but not as a protocol message).  A sealed message the link gave up on
+        goes again (a new copy) while :meth:`_persists`, unless the peer's next message shows
+        it arrived."""
         while True:
             try:
                 await self.endpoint.send(self.peer, self.session, data)
@@ -145,25 +154,44 @@ class _Party:
                     break  # the peer answered it: it arrived, only the ACKs were lost
                 self.report.resent += 1
                 await self.endpoint.clock.sleep(RESEND_PAUSE_S)
-        self.report.messages_sent += 1
+        if self.channel is not None and self.channel.keyed:
+            self.last_sent = data
+        if copy:  # a copy sent again: the link's statistics count it
+            return
+        self.report.messages_sent += not end  # (the end of a run is authentication's bytes)
         self.report.bytes_sent += len(data)
         self.report.auth_bytes_sent += len(data) - (len(data) if payload is None else payload)
 
-    async def receive(self) -> bytes:
+    async def receive(self, rounds: int | None = None) -> bytes:
         """The peer's next message; a copy of the last one (sent again: our acknowledgement
-        was lost) is skipped."""
+        was lost) is skipped.  Once keyed, a silence of :meth:`_quiet_s` while the peer is
+        heard is waited out, and our own last message goes again each time: the peer may
+        wait for it while we wait for its answer (a copy the link took for delivered on an
+        acknowledgement anybody can forge).  ``rounds``: at most that many such silences,
+        then :class:`LinkTimeout`."""
+        keyed = self.channel is not None and self.channel.keyed
+        wait = self._quiet_s() if keyed and self.alive is not None else None
         while True:
             try:
-                message = await self.endpoint.receive(self.peer, self.session)
+                message = await self.endpoint.receive(self.peer, self.session, wait)
             except LinkTimeout:
-                if not self._persists():
+                if not self._persists() or rounds == 0:
                     raise
-                # a jammer: the peer is heard, its messages do not come through
-                await self.endpoint.clock.sleep(RESEND_PAUSE_S)
+                rounds = None if rounds is None else rounds - 1
+                if self.last_sent:
+                    self.report.resent += 1
+                    await self.send(self.last_sent, copy=True)
+                else:
+                    await self.endpoint.clock.sleep(RESEND_PAUSE_S)
                 continue
             if message != self.last_received:
                 self.last_received = message
                 return message
+
+    def _quiet_s(self) -> float:
+        """How long a keyed run waits in silence before it sends its last message again (a
+        duty cycle may hold a frame back for a tenth of the idle timeout)."""
+        return max(QUIET_S, self.endpoint.idle_timeout / 10)
 
     def abort(self, code: AbortCode) -> None:
         """End the run here and tell the peer, with the session's proof once it is keyed."""
@@ -250,6 +278,9 @@ async def run_alice(
                     reply = channel.open(reply)
                 message = await party.compute(partial(alice.receive, reply))
             first = False
+        if channel is not None:  # the end, sealed: Bob stops sending his last message again
+            with contextlib.suppress(LinkError):  # (the answer stands either way)
+                await party.send(channel.seal(b""), 0, end=True)
 
     await _guard(party, run, timeout)
     report.hits = alice.hits
@@ -301,6 +332,22 @@ async def serve_bob(
             else:
                 await party.send(secure.seal(reply), len(reply))
             opened = True
+        if secure is not None and opened:
+            await _await_end(party)
 
     await _guard(party, run, timeout)
     return report
+
+
+async def _await_end(party: _Party) -> None:
+    """Bob after his last message: wait for Alice's sealed end of run, sending the message
+    again (at most ``END_TRIES`` times, while she is heard) when it does not come -- an
+    acknowledgement anybody can forge, or a jammed fragment, must not leave her without
+    the answer he counted."""
+    assert party.channel is not None
+    try:
+        message = await party.receive(rounds=END_TRIES)
+    except LinkTimeout:
+        return  # (she is gone, or kept silent: the run counts either way)
+    if party.channel.open(message) != b"":
+        raise AuthenticationError("not the end of the run")

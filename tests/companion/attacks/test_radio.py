@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -312,6 +313,15 @@ def last_of_bob(w: World) -> int:
     return sum(not from_alice for from_alice, _ in sizes) - 1
 
 
+async def counted_after(w: World, attack: Callable[[Frame], Frame | None], seconds: float) -> int:
+    """Drone 1's radio under ``attack`` for ``seconds``: the runs drone 2 counted."""
+    w.taps[1].rewrite = attack
+    await w.clock.sleep(seconds)
+    counted = w.drones[2].store.count_runs(0, "bob")
+    await w.stop()
+    return int(counted)
+
+
 def test_a_jammed_last_message_still_reaches_alice(tmp_path: Path) -> None:
     """The attacker jams every copy of drone 2's last message of the run (its shares of the
     answer), and whatever drone 2 sends in the run after it, for 500 s: longer than drone 2's
@@ -332,10 +342,7 @@ def test_a_jammed_last_message_still_reaches_alice(tmp_path: Path) -> None:
                     return None
             return frame
 
-        w.taps[1].rewrite = jam
-        await w.clock.sleep(900)
-        counted = w.drones[2].store.count_runs(0, "bob")
-        await w.stop()
+        counted = await counted_after(w, jam, 900)
         assert jammed and jammed[-1] - jammed[0] >= 500
         return w, counted, len(jammed)
 
@@ -344,7 +351,7 @@ def test_a_jammed_last_message_still_reaches_alice(tmp_path: Path) -> None:
     assert result["flagged"] == [0] and w.autopilots[1].uploads and counted == 1
     assert len(w.events(1, "run_started")) == 1 and not w.events(1, "run_failed")
     assert len(w.events(2, "answered")) == 1 and not w.events(2, "answer_failed")
-    assert copies >= 20
+    assert copies >= 10
 
 
 def test_a_flood_of_first_fragments_does_not_deafen_a_drone(tmp_path: Path) -> None:
@@ -384,6 +391,38 @@ def test_a_flood_of_first_fragments_does_not_deafen_a_drone(tmp_path: Path) -> N
         receiver = w.drones[node].endpoint.receiver
         assert receiver.stats.refused.get("evicted", 0) >= 8
         assert receiver.pending() <= receiver.max_partial
+
+
+def test_a_forged_acknowledgement_does_not_cost_alice_her_answer(tmp_path: Path) -> None:
+    """The attacker jams drone 2's last message of the run at drone 1 and at once sends drone
+    2 an acknowledgement of the whole message as if from drone 1 (link ACKs carry no key).
+    Before, drone 2 took the message for delivered and counted the run, and drone 1 waited
+    for it in vain.  Now drone 2 waits for drone 1's sealed end of run and, without it,
+    sends the message again: the one run gives its result."""
+    from companion.link.frames import AckInfo, Flag
+
+    async def main() -> tuple[World, int, list[Frame]]:
+        w = await world(tmp_path)
+        last = last_of_bob(w)
+        forged: list[Frame] = []
+
+        def jam_and_acknowledge(frame: Frame) -> Frame | None:
+            if frame.src == 2 and frame.type is FrameType.DATA and frame.seq == last:
+                if not forged:  # the first copy is jammed, a forged ACK goes to drone 2
+                    ack = Frame(FrameType.ACK, 1, 2, frame.session, frame.seq, 0, frame.count,
+                                AckInfo(frame.count).encode(), Flag.COMPLETE)  # fmt: skip
+                    forged.append(ack)
+                    asyncio.get_running_loop().create_task(w.inject(ack.encode()))
+                    return None
+            return frame
+
+        return w, await counted_after(w, jam_and_acknowledge, 600), forged
+
+    w, counted, forged = run(main())
+    assert len(forged) == 1
+    (result,) = w.events(1, "result")
+    assert result["flagged"] == [0] and counted == 1 and not w.events(1, "run_failed")
+    assert len(w.events(1, "run_started")) == 1
 
 
 def test_forged_aborts_end_no_run_and_spend_nothing(tmp_path: Path) -> None:
