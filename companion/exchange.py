@@ -162,20 +162,24 @@ class _Party:
         self.report.bytes_sent += len(data)
         self.report.auth_bytes_sent += len(data) - (len(data) if payload is None else payload)
 
-    async def receive(self, rounds: int | None = None) -> bytes:
+    async def receive(self, rounds: int | None = None, *, patient: bool = True) -> bytes:
         """The peer's next message; a copy of the last one (sent again: our acknowledgement
-        was lost) is skipped.  Once keyed, a silence of :meth:`_quiet_s` while the peer is
-        heard is waited out, and our own last message goes again each time: the peer may
-        wait for it while we wait for its answer (a copy the link took for delivered on an
+        was lost) is skipped.  Once keyed, while the peer is heard, a silence of
+        :meth:`_quiet_s` makes our own last message go again: the peer may wait for it
+        while we wait for its answer (a copy the link took for delivered on an
         acknowledgement anybody can forge).  ``rounds``: at most that many such silences,
-        then :class:`LinkTimeout`."""
+        then :class:`LinkTimeout`.  A peer not heard gets the link's idle timeout, from
+        the last frame of the session (``patient``), or none (:class:`LinkTimeout` after
+        the short silence)."""
         keyed = self.channel is not None and self.channel.keyed
-        wait = self._quiet_s() if keyed and self.alive is not None else None
+        quiet = self._quiet_s() if keyed and self.alive is not None else None
         while True:
+            persists = quiet is not None and self._persists()
+            limit = quiet if persists or (quiet is not None and not patient) else None
             try:
-                message = await self.endpoint.receive(self.peer, self.session, wait)
+                message = await self.endpoint.receive(self.peer, self.session, limit)
             except LinkTimeout:
-                if not self._persists() or rounds == 0:
+                if not persists or rounds == 0:
                     raise
                 rounds = None if rounds is None else rounds - 1
                 if self.last_sent:
@@ -346,7 +350,7 @@ async def _await_end(party: _Party) -> None:
     the answer he counted."""
     assert party.channel is not None
     try:
-        message = await party.receive(rounds=END_TRIES)
+        message = await party.receive(rounds=END_TRIES, patient=False)
     except LinkTimeout:
         return  # (she is gone, or kept silent: the run counts either way)
     if party.channel.open(message) != b"":
