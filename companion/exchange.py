@@ -16,9 +16,11 @@ Nobody else can end or spend a run: the link ignores an abort without the sessio
 its MAC).  Once keyed, while ``alive()`` says the peer is still heard, a message the link
 gave up on (a jammer) is sent again until the peer has it, and silence is waited out, within
 the run's time limit -- Bob counts a run from his first reply on, and what he computed
-reaches Alice unless every copy is jammed for that long.  Alice ends a keyed run with a
-sealed empty message; until it comes Bob sends his last message again (an acknowledgement
-is anybody's to forge).  A copy received again is no news and is skipped.
+reaches Alice unless every copy is jammed for that long.  An acknowledgement is anybody's to
+forge, so a keyed run that hears nothing for a while sends its own last message again, and
+Bob keeps a finished run's session open for a few such silences (beside his radio turn) to
+answer a copy of Alice's last message with his last one.  A copy received again is no news
+and is skipped.
 
 Without a session object (``secure=None``) the messages travel in the clear: benchmarks use it
 to measure what authentication adds; the companion never does.
@@ -28,7 +30,6 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import contextlib
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
@@ -51,7 +52,7 @@ T = TypeVar("T")
 _WORKERS = concurrent.futures.ThreadPoolExecutor(max_workers=2, thread_name_prefix="protocol")
 RESEND_PAUSE_S = 5.0  # before a sealed message the link gave up on goes again
 QUIET_S = 30.0  # a keyed run's silence (at least) before our last message goes again
-END_TRIES = 3  # Bob sends his last message again at most this often for Alice's end
+LINGER_QUIETS = 4  # Bob keeps a finished run's session this many silences long
 
 
 class PeerRefused(Exception):
@@ -135,12 +136,9 @@ class _Party:
         keyed = self.channel is not None and self.channel.keyed
         return keyed and self.alive is not None and self.alive()
 
-    async def send(
-        self, data: bytes, payload: int | None = None, *, copy: bool = False, end: bool = False
-    ) -> None:
+    async def send(self, data: bytes, payload: int | None = None, *, copy: bool = False) -> None:
         """Send ``data`` (``payload`` bytes of it the protocol's own; the rest authentication;
-        ``copy``: our last message again, not counted; ``end``: the sealed end of a run, its
-        bytes counted but not as a protocol message).  A sealed message the link gave up on
+        ``copy``: our last message again, not counted).  A sealed message the link gave up on
         goes again (a new copy) while :meth:`_persists`, unless the peer's next message shows
         it arrived."""
         while True:
@@ -158,30 +156,28 @@ class _Party:
             self.last_sent = data
         if copy:  # a copy sent again: the link's statistics count it
             return
-        self.report.messages_sent += not end  # (the end of a run is authentication's bytes)
+        self.report.messages_sent += 1
         self.report.bytes_sent += len(data)
         self.report.auth_bytes_sent += len(data) - (len(data) if payload is None else payload)
 
-    async def receive(self, rounds: int | None = None, *, patient: bool = True) -> bytes:
+    async def receive(self) -> bytes:
         """The peer's next message; a copy of the last one (sent again: our acknowledgement
         was lost) is skipped.  Once keyed, while the peer is heard, a silence of
         :meth:`_quiet_s` makes our own last message go again: the peer may wait for it
         while we wait for its answer (a copy the link took for delivered on an
-        acknowledgement anybody can forge).  ``rounds``: at most that many such silences,
-        then :class:`LinkTimeout`.  A peer not heard gets the link's idle timeout, from
-        the last frame of the session (``patient``), or none (:class:`LinkTimeout` after
-        the short silence)."""
+        acknowledgement anybody can forge).  A peer not heard gets the link's idle timeout,
+        from the last frame of the session."""
         keyed = self.channel is not None and self.channel.keyed
         quiet = self._quiet_s() if keyed and self.alive is not None else None
         while True:
             persists = quiet is not None and self._persists()
-            limit = quiet if persists or (quiet is not None and not patient) else None
             try:
-                message = await self.endpoint.receive(self.peer, self.session, limit)
+                message = await self.endpoint.receive(
+                    self.peer, self.session, quiet if persists else None
+                )
             except LinkTimeout:
-                if not persists or rounds == 0:
+                if not persists:
                     raise
-                rounds = None if rounds is None else rounds - 1
                 if self.last_sent:
                     self.report.resent += 1
                     await self.send(self.last_sent, copy=True)
@@ -204,7 +200,12 @@ class _Party:
         self.endpoint.abort(self.peer, self.session, code, proof)
 
 
-async def _guard(party: _Party, run: Callable[[], Awaitable[None]], timeout: float | None) -> None:
+async def _guard(
+    party: _Party, run: Callable[[], Awaitable[None]], timeout: float | None, *, close: bool = True
+) -> None:
+    """Run ``run`` within ``timeout``; whatever ends it, the machine and the session end in a
+    known state (``close=False``: a run that ended well leaves the session open, for
+    :func:`_linger`)."""
     endpoint, peer, session = party.endpoint, party.peer, party.session
     try:
         async with endpoint.clock.timeout(timeout):
@@ -229,7 +230,8 @@ async def _guard(party: _Party, run: Callable[[], Awaitable[None]], timeout: flo
         party.abort(AbortCode.SHUTDOWN)
         raise
     else:
-        endpoint.close_session(peer, session)
+        if close:
+            endpoint.close_session(peer, session)
     finally:
         party.report.finished = endpoint.clock.now()
 
@@ -282,9 +284,6 @@ async def run_alice(
                     reply = channel.open(reply)
                 message = await party.compute(partial(alice.receive, reply))
             first = False
-        if channel is not None:  # the end, sealed: Bob stops sending his last message again
-            with contextlib.suppress(LinkError):  # (the answer stands either way)
-                await party.send(channel.seal(b""), 0, end=True)
 
     await _guard(party, run, timeout)
     report.hits = alice.hits
@@ -336,22 +335,29 @@ async def serve_bob(
             else:
                 await party.send(secure.seal(reply), len(reply))
             opened = True
-        if secure is not None and opened:
-            await _await_end(party)
 
-    await _guard(party, run, timeout)
+    keyed = secure is not None and secure.keyed and alive is not None
+    await _guard(party, run, timeout, close=not keyed)
+    if keyed:
+        endpoint.linger(peer, session, _linger(party))
     return report
 
 
-async def _await_end(party: _Party) -> None:
-    """Bob after his last message: wait for Alice's sealed end of run, sending the message
-    again (at most ``END_TRIES`` times, while she is heard) when it does not come -- an
-    acknowledgement anybody can forge, or a jammed fragment, must not leave her without
-    the answer he counted."""
-    assert party.channel is not None
+async def _linger(party: _Party) -> None:
+    """Bob after his last message, beside the radio turn: for ``LINGER_QUIETS`` of Alice's
+    silences, a copy of her last message -- she is still waiting: an acknowledgement
+    anybody can forge, or a jammed fragment, took ours for delivered -- is answered with
+    our last message again.  Then the session closes."""
+    endpoint, peer, session = party.endpoint, party.peer, party.session
+    seconds = LINGER_QUIETS * party._quiet_s()
     try:
-        message = await party.receive(rounds=END_TRIES, patient=False)
-    except LinkTimeout:
-        return  # (she is gone, or kept silent: the run counts either way)
-    if party.channel.open(message) != b"":
-        raise AuthenticationError("not the end of the run")
+        async with endpoint.clock.timeout(seconds):
+            while True:
+                message = await endpoint.receive(peer, session, seconds)
+                if message == party.last_received and party.last_sent:
+                    party.report.resent += 1
+                    await endpoint.send(peer, session, party.last_sent)
+    except (TimeoutError, LinkError):
+        pass
+    finally:
+        endpoint.close_session(peer, session)

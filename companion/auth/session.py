@@ -19,8 +19,6 @@ protocol's own first round trip, so authentication costs no extra radio turn:
 * sig_B covers th2 = H(th1, eB), th1 the hash of message 1 and the route: Alice knows Bob
   answered this very request.  Keys: HKDF-SHA256(X25519(eA, eB), salt th2) -> one key per
   direction; nonces count messages per direction.
-* Alice ends a run with a sealed empty message: Bob's last one arrived (link ACKs, which
-  anybody can forge, do not prove it; :mod:`companion.exchange`).
 * Every AEAD's associated data is the running hash of everything before it (message 1, eB,
   every earlier ciphertext), so a forged, replayed, reordered or spliced message fails its
   tag: :class:`AuthenticationError`, and the run ends with no result.

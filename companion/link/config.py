@@ -47,3 +47,4 @@ class Session:
     # A keyed session (:meth:`LinkEndpoint.secure`): an ABORT ends it only with a proof this
     # says is the peer's; without one it is ignored (anybody can put an ABORT on the air).
     abort_check: Callable[[int, bytes], bool] | None = None
+    lingering: bool = False  # a finished run kept open to answer a late copy (``linger``)

@@ -14,7 +14,8 @@ import logging
 import math
 import random
 import secrets
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
+from typing import Any
 
 from ..tasks import spawn
 from .airtime import DutyCycle, LinkProfile
@@ -90,6 +91,7 @@ class LinkEndpoint:
         self._outgoing: dict[tuple[int, int, int], tuple[Outgoing, asyncio.Event]] = {}
         self._timers: dict[int, RetransmissionTimer] = {}
         self._tasks: list[asyncio.Task[None]] = []
+        self._lingering: set[asyncio.Task[None]] = set()
         self._last_traffic = -math.inf
         self._beacon_seq = secrets.randbelow(256)
         self._beacon_parts = BeaconParts(self.stats)
@@ -117,9 +119,10 @@ class LinkEndpoint:
 
     async def close(self) -> None:
         self.radio.running = False
-        for task in self._tasks:
+        tasks = [*self._tasks, *self._lingering]
+        for task in tasks:
             task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)  # a dead one was logged
+        await asyncio.gather(*tasks, return_exceptions=True)  # a dead one was logged
         self.radio.fail_pending(LinkError("link endpoint closed"))
         await self.transport.close()
 
@@ -180,6 +183,15 @@ class LinkEndpoint:
         self.close_session(peer, session)
         self._aborted[(peer, session)] = frame  # repeated to whoever still asks (like a RST)
 
+    def linger(self, peer: int, session: int, work: Coroutine[Any, Any, None]) -> None:
+        """Let ``work`` keep the open session (it closes it) beside whatever comes next: a
+        finished run that may still be asked for its last message.  A lingering session
+        does not make the radio :meth:`busy`; it ends with the endpoint."""
+        self._session(peer, session).lingering = True
+        task = spawn(work, name=f"link-linger-{self.node}-{peer}-{session}", log=log)
+        self._lingering.add(task)
+        task.add_done_callback(self._lingering.discard)
+
     def has_message(self, peer: int, session: int) -> bool:
         """A message of the session waits to be received."""
         sess = self._sessions.get((peer, session))
@@ -189,7 +201,7 @@ class LinkEndpoint:
         """A session is open, a message half received, or session traffic was heard in the
         last ``quiet_s`` seconds: a beacon now would likely collide with somebody's run."""
         return bool(
-            self._sessions
+            any(not sess.lingering for sess in self._sessions.values())
             or self.receiver.pending()
             or self.clock.now() - self._last_traffic < quiet_s
         )
