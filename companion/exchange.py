@@ -51,7 +51,7 @@ T = TypeVar("T")
 # event loop's default pool, and a step queued behind them would wait for seconds.
 _WORKERS = concurrent.futures.ThreadPoolExecutor(max_workers=2, thread_name_prefix="protocol")
 RESEND_PAUSE_S = 5.0  # before a sealed message the link gave up on goes again
-QUIET_S = 30.0  # a keyed run's silence (at least) before our last message goes again
+QUIET_S = 120.0  # a keyed run's silence (at least) before our last message goes again
 LINGER_QUIETS = 4  # Bob keeps a finished run's session this many silences long
 
 

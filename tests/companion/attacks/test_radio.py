@@ -397,7 +397,7 @@ def test_a_forged_acknowledgement_does_not_cost_alice_her_answer(tmp_path: Path)
     """The attacker jams drone 2's last message of the run at drone 1 and at once sends drone
     2 an acknowledgement of the whole message as if from drone 1 (link ACKs carry no key).
     Before, drone 2 took the message for delivered and counted the run, and drone 1 waited
-    for it in vain.  Now drone 1, hearing nothing for 30 s while drone 2's beacons come,
+    for it in vain.  Now drone 1, hearing nothing for 120 s while drone 2's beacons come,
     sends its last message again, and drone 2, which keeps the finished run's session open
     for a while, answers that copy with its last message: the one run gives its result."""
     from companion.link.frames import AckInfo, Flag
