@@ -167,13 +167,11 @@ class _Party:
         while we wait for its answer (a copy the link took for delivered on an
         acknowledgement anybody can forge).  A peer not heard gets the link's idle timeout,
         from the last frame of the session."""
-        keyed = self.channel is not None and self.channel.keyed
-        quiet = self._quiet_s() if keyed and self.alive is not None else None
         while True:
-            persists = quiet is not None and self._persists()
+            persists = self._persists()
             try:
                 message = await self.endpoint.receive(
-                    self.peer, self.session, quiet if persists else None
+                    self.peer, self.session, self._quiet_s() if persists else None
                 )
             except LinkTimeout:
                 if not persists:
