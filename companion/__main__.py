@@ -9,10 +9,10 @@ import asyncio
 import difflib
 import sys
 
+from companion.cli import commands
+from companion.cli import keys as keys_cli
+from companion.radio.airtime import PHY_MAX_FRAME, PROFILES
 from protocol.tools import cli
-
-from . import commands, keys_cli
-from .link.airtime import PHY_MAX_FRAME, PROFILES
 
 DESCRIPTION = (
     "The flight companion of private drone deconfliction: it reads the mission through "
@@ -37,8 +37,8 @@ def _profiles(text: str) -> tuple[str, ...]:
 
 
 def _autopilot_url(text: str) -> str:
-    """A MAVSDK connection URL (:func:`companion.autopilot.check_url`)."""
-    from .autopilot import check_url
+    """A MAVSDK connection URL (:func:`companion.mission.autopilot.check_url`)."""
+    from companion.mission.autopilot import check_url
 
     try:
         return check_url(text)
@@ -60,7 +60,7 @@ def _mavlink_message(text: str) -> str:
 
 
 def _log_flags(parser: argparse.ArgumentParser, level_help: str) -> None:
-    """--log-level and --log-json (:mod:`companion.logs`)."""
+    """--log-level and --log-json (:mod:`companion.app.logs`)."""
     parser.add_argument(
         "--log-level", choices=["debug", "info", "warning", "error"], help=level_help
     )
@@ -268,7 +268,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--config", type=cli.existing_file, help="TOML settings, [identity] and [trust] included"
     )
-    # Defaults come from the config file, else from companion/config.py (the help names
+    # Defaults come from the config file, else from companion/app/config.py (the help names
     # both; tests/test_cli_errors.py checks they agree).
     given = "default: the config's %s, else %s"
     run.add_argument(
@@ -329,13 +329,13 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .autopilot import AutopilotError
-    from .link.arq import LinkError
+    from companion.mission.autopilot import AutopilotError
+    from companion.radio.arq import LinkError
 
     args = _parser().parse_args(argv)
     expected: tuple[type[BaseException], ...] = (AutopilotError, LinkError)
     if args.command == "replay":  # PX4 SITL only flies there (its import takes 0.1 s)
-        from .sim.px4 import Px4Error
+        from companion.sim.px4 import Px4Error
 
         expected += (Px4Error,)
     return cli.run(args.func, args, expected)

@@ -3,7 +3,7 @@
 A task nobody awaits until stop (a transmit queue, a keep-alive, a progress logger, a mock's
 flight) that raises would otherwise die unseen: the radio goes quiet, the vehicle stops, and
 the exception surfaces (if ever) at shutdown.  :func:`spawn` starts a task whose failure is
-logged at once with its traceback, as a ``task_failed`` event (:mod:`companion.logs`, so a
+logged at once with its traceback, as a ``task_failed`` event (:mod:`companion.app.logs`, so a
 JSON-lines log records it too), and handed to the owner's ``on_failure`` to act on (the link
 endpoint fails its pending sends).  Cancellation is not a failure.
 """

@@ -2,23 +2,27 @@
 
 Pure state machines and value types; no sockets, no asyncio, no clocks.  Start reading at
 :mod:`protocol.intersection` (the path protocol and its two suites), then the sub-protocols it
-composes: :mod:`protocol.products`, :mod:`protocol.millionaire` and :mod:`protocol.gmw` on the
-OT layer (:mod:`protocol.ot`) for the compact suite; :mod:`protocol.comparison` (Veugen) and
-:mod:`protocol.hegates` on :mod:`protocol.paillier` and :mod:`protocol.dgk` for the paper suite.
+composes: :mod:`protocol.compact.products`, :mod:`protocol.compact.millionaire` and
+:mod:`protocol.compact.gmw` on the OT layer (:mod:`protocol.ot`) for the compact suite;
+:mod:`protocol.paper.comparison` (Veugen) and
+:mod:`protocol.paper.hegates` on :mod:`protocol.primitives.paillier` and
+:mod:`protocol.primitives.dgk` for the paper suite.
 """
 
-from .comparison import ComparisonAlice, ComparisonBob
-from .dgk import DGKCiphertext, DGKPrivateKey, DGKPublicKey
-from .errors import (
+from protocol.errors import (
     InsecureParametersError,
     LocalProtocolError,
     ProtocolError,
     RemoteProtocolError,
 )
-from .intersection import Alice, Bob, BobKeys, Limits
-from .paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
-from .params import SecurityParameters
-from .wire import Suite
+from protocol.intersection import Alice, Bob
+from protocol.messages import Suite
+from protocol.paper.comparison import ComparisonAlice, ComparisonBob
+from protocol.paper.keys import BobKeys
+from protocol.primitives.dgk import DGKCiphertext, DGKPrivateKey, DGKPublicKey
+from protocol.primitives.paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
+from protocol.primitives.params import SecurityParameters
+from protocol.run import Limits
 
 __all__ = [
     "Alice",

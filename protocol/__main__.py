@@ -8,8 +8,8 @@ import argparse
 import json
 import sys
 
-from .tools import cli
-from .volumes import MAX_SEPARATION
+from protocol.geo.volumes import MAX_SEPARATION
+from protocol.tools import cli
 
 DESCRIPTION = (
     "The encrypted path-intersection protocol of private drone deconfliction: Alice learns "
@@ -26,14 +26,14 @@ MOVED = (
 
 
 def _demo(_args: argparse.Namespace) -> int:
-    from .tools.demo import run_demo
+    from protocol.tools.demo import run_demo
 
     return run_demo()
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from .tools.compare import compare, format_compare
-    from .volumes import Separation
+    from protocol.geo.volumes import Separation
+    from protocol.tools.compare import compare, format_compare
 
     result = compare(
         args.alice,
@@ -49,17 +49,17 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from .volumes import Separation
+    from protocol.geo.volumes import Separation
 
     result: dict[str, object]
     if args.what == "crypto":
-        from .tools.bench import bench_crypto, format_crypto
+        from protocol.tools.bench import bench_crypto, format_crypto
 
         result = bench_crypto(repeat=args.repeat or 15, progress=not args.quiet)
         text = format_crypto(result)
     elif args.what == "paper":
-        from .tools.bench_paths import bench_paper, format_paper
-        from .tools.paper_data import HINT
+        from protocol.tools.bench_paths import bench_paper, format_paper
+        from protocol.tools.paper_data import HINT
 
         if args.data is None:
             raise cli.InputError(f"bench paper: --data DIR is needed ({HINT})")
@@ -68,12 +68,12 @@ def _bench(args: argparse.Namespace) -> int:
         )
         text = format_paper(result)
     elif args.what == "design":
-        from .tools.bench_paths import bench_design, format_design
+        from protocol.tools.bench_paths import bench_design, format_design
 
         result = bench_design((args.sizes or (8,))[0], args.range or 99, progress=not args.quiet)
         text = format_design(result)
     else:
-        from .tools.bench_paths import bench_scaling, format_scaling
+        from protocol.tools.bench_paths import bench_scaling, format_scaling
 
         sizes = args.sizes or (1, 2, 4, 8, 16, 32)
         result = bench_scaling(

@@ -11,8 +11,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from companion.mission import NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT, MissionItem
-from companion.missionfile import write_plan
+from companion.mission.files import format_plan
+from companion.mission.items import NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT, MissionItem
+from protocol.tools.cli import write_atomic
 
 C = (47.4000, 8.5450)
 ALT = 30.0
@@ -21,7 +22,7 @@ OUT = Path(__file__).resolve().parent.parent / "sitl_configs" / "scenarios"
 
 def at(east: float, north: float) -> tuple[float, float]:
     """(lat, lon) ``east``/``north`` metres from C on a 6371 km sphere.  Not
-    :mod:`protocol.geodesy`'s ellipsoid, on purpose: the committed .plan files were written
+    :mod:`protocol.geo.geodesy`'s ellipsoid, on purpose: the committed .plan files were written
     with this sphere, and ``geodesy.moved`` would move their points by up to 4.5 m (checked:
     inflight_star_east), which changes the replays' timing; switch when regenerating them."""
     lat = C[0] + math.degrees(north / 6_371_000.0)
@@ -53,7 +54,7 @@ def route(name: str, heading_deg: float, stations: list[float], home_back: float
     for d in stations:
         items.append(item(NAV_WAYPOINT, d, ALT))
     items.append(item(NAV_LAND, stations[-1] + 20, 0.0))
-    write_plan(OUT / f"{name}.plan", items, [home[0], home[1], 488.0])
+    write_atomic(OUT / f"{name}.plan", format_plan(items, [home[0], home[1], 488.0]))
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ near misses whose tracks never cross, altitude that makes a crossing no conflict
 one), time that does, a crossing in the middle of a first leg, a drone held up on its way,
 and six drones whose tracks cross at different times.  Every drone flies at 30 m above a home
 at 488 m unless said otherwise; distances are metres east/north of a common point C, on the
-project's one Earth model (:func:`protocol.geodesy.moved`).  Run from the repository root:
+project's one Earth model (:func:`protocol.geo.geodesy.moved`).  Run from the repository root:
 ``.venv/bin/python scripts/make_separation_scenarios.py``.
 """
 
@@ -14,9 +14,16 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from companion.mission import NAV_LAND, NAV_LOITER_TIME, NAV_TAKEOFF, NAV_WAYPOINT, MissionItem
-from companion.missionfile import write_plan
-from protocol.geodesy import moved
+from companion.mission.files import format_plan
+from companion.mission.items import (
+    NAV_LAND,
+    NAV_LOITER_TIME,
+    NAV_TAKEOFF,
+    NAV_WAYPOINT,
+    MissionItem,
+)
+from protocol.geo.geodesy import moved
+from protocol.tools.cli import write_atomic
 
 C = (47.4010, 8.5500)
 HOME_AMSL = 488.0
@@ -53,7 +60,7 @@ def mission(
     d = math.hypot(x1 - x0, y1 - y0)
     items.append(item(NAV_LAND, (x1 + 20 * (x1 - x0) / d, y1 + 20 * (y1 - y0) / d), 0.0))
     home = at(legs[0])
-    write_plan(OUT / f"{name}.plan", items, [home[0], home[1], HOME_AMSL])
+    write_atomic(OUT / f"{name}.plan", format_plan(items, [home[0], home[1], HOME_AMSL]))
 
 
 def scenario(name: str, comment: str, drones: list[tuple[str, str]], **keys: object) -> None:

@@ -27,6 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from companion.sim.bench_link import bench_link, format_link
+from protocol.geo.volumes import Separation
 from protocol.tools.bench import bench_crypto, format_crypto
 from protocol.tools.bench_paths import (
     bench_design,
@@ -36,7 +37,6 @@ from protocol.tools.bench_paths import (
     format_paper,
     format_scaling,
 )
-from protocol.volumes import Separation
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "benchmarks.md"

@@ -10,12 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from protocol.dgk import DGKPrivateKey, DGKPublicKey
-from protocol.intersection import DGK_BITS, BobKeys
 from protocol.ot.setup import ChooserSetup, HolderSetup, HolderSetupStart, chooser_setup
-from protocol.paillier import PaillierPrivateKey, PaillierPublicKey
-
-from .paper_shaped import (
+from protocol.paper.keys import DGK_BITS, BobKeys
+from protocol.primitives.dgk import DGKPrivateKey, DGKPublicKey
+from protocol.primitives.paillier import PaillierPrivateKey, PaillierPublicKey
+from tests.paper_shaped import (
     ANCHOR,
     ANCHOR_PAIR_BITS,
     ANCHOR_ROUTE_HITS,

@@ -17,7 +17,7 @@ from pathlib import Path
 from shapely.geometry import LineString
 from shapely.geometry import Point as ShapelyPoint
 
-from protocol.geometry import Point, path_hits
+from protocol.geo.geometry import Point, path_hits
 
 ANCHOR = Path(__file__).resolve().parents[2] / "shared" / "anchor-data"
 # The answers the paper's own files have (anchor-data/README.md: closed segments, touching

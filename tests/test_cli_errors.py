@@ -21,7 +21,8 @@ import pytest
 import companion.__main__ as companion_cli
 import protocol.__main__ as protocol_cli
 from companion.auth.certificate import Certificate
-from companion.auth.keys import SigningKey, write_private_key, write_public_key
+from companion.auth.keys import SigningKey
+from companion.cli.keys import write_private_key, write_public_key
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "sitl_configs" / "scenarios"
 
@@ -346,7 +347,7 @@ def _options(parser: argparse.ArgumentParser, name: str) -> list[tuple[str, argp
 def test_every_option_shows_its_default() -> None:
     """``--help`` shows each option's default (0 and 0.0 too), or says what happens without
     it; the run flags' defaults, which come from the config, name the config's own."""
-    from companion.config import load_config
+    from companion.app.config import load_config
 
     options = _options(companion_cli._parser(), "companion")
     options += _options(protocol_cli._parser(), "protocol")

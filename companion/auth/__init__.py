@@ -8,10 +8,17 @@ and ChaCha20-Poly1305 on every protocol message).  ``docs/security.md`` says wha
 stops.
 """
 
-from .certificate import Certificate, CertificateError
-from .keys import KeyFileError, PublicKey, SigningKey
-from .session import AuthenticationError, Identity, Initiator, Refusal, Responder, Route
-from .trust import Operator, TrustStore, UnknownPeers, Untrusted, UntrustedPeer
+from companion.auth.certificate import Certificate, CertificateError
+from companion.auth.keys import KeyFileError, PublicKey, SigningKey
+from companion.auth.session import (
+    AuthenticationError,
+    Identity,
+    Initiator,
+    Refusal,
+    Responder,
+    Route,
+)
+from companion.auth.trust import Operator, TrustStore, UnknownPeers, Untrusted, UntrustedPeer
 
 __all__ = [
     "AuthenticationError",

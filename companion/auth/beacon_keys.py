@@ -1,5 +1,5 @@
 """Beacon keys: the X25519 key a drone makes at every start, and the pairwise tag keys it
-gives with each neighbour's (:mod:`companion.beacon`, tagged beacons).
+gives with each neighbour's (:mod:`companion.neighbours.beacon`, tagged beacons).
 
 Both drones of a pair compute the same two keys, one per direction, from X25519 of their
 beacon keys (each announced in a signed beacon, so each key is bound to a certified drone),

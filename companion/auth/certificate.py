@@ -16,7 +16,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from .keys import FINGERPRINT_SIZE, PUBLIC_SIZE, SIGNATURE_SIZE, PublicKey, SigningKey
+from companion.auth.keys import FINGERPRINT_SIZE, PUBLIC_SIZE, SIGNATURE_SIZE, PublicKey, SigningKey
 
 VERSION = 1
 _BODY = struct.Struct(f">BH{PUBLIC_SIZE}s{FINGERPRINT_SIZE}sII")

@@ -7,9 +7,9 @@ X25519, HKDF and ChaCha20-Poly1305 (:mod:`companion.auth.session`), so the radio
 rests on one audited implementation.  (BIP-340 Schnorr through coincurve would have saved
 the dependency for signatures only, not for the AEAD.)
 
-Files: a private key is PKCS#8 PEM, written atomically with mode 0600; a public key is
-SubjectPublicKeyInfo PEM (both read by ``openssl pkey``).  A public key may also be given as
-64 hex digits (a trust store entry in a config file).
+Files: a private key is PKCS#8 PEM (written with mode 0600 by :mod:`companion.cli.keys`); a
+public key is SubjectPublicKeyInfo PEM (both read by ``openssl pkey``).  A public key may also be
+given as 64 hex digits (a trust store entry in a config file).
 """
 
 from __future__ import annotations
@@ -21,8 +21,6 @@ from pathlib import Path
 from cryptography.exceptions import InvalidSignature, UnsupportedAlgorithm
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
-
-from protocol.tools import cli
 
 PUBLIC_SIZE = 32
 SIGNATURE_SIZE = 64
@@ -102,26 +100,11 @@ class SigningKey:
         )
 
 
-def write_atomic(path: Path, data: bytes, mode: int = 0o644) -> None:
-    """Write ``data`` to ``path`` whole or not at all (:func:`protocol.tools.cli.write_atomic`)."""
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise KeyFileError(f"{path}: directory {path.parent} does not exist")
-    try:
-        cli.write_atomic(path, data, mode)
-    except OSError as exc:
-        raise KeyFileError(f"{path}: {exc.strerror or exc}") from None
-
-
-def write_private_key(path: Path, key: SigningKey) -> None:
-    write_atomic(path, key.pem(), 0o600)
-
-
-def write_public_key(path: Path, key: PublicKey) -> None:
-    pem = Ed25519PublicKey.from_public_bytes(key.raw).public_bytes(
+def public_pem(key: PublicKey) -> bytes:
+    """A public key as SubjectPublicKeyInfo PEM (what a ``.pub`` file holds)."""
+    return Ed25519PublicKey.from_public_bytes(key.raw).public_bytes(
         serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo
     )
-    write_atomic(path, pem)
 
 
 def _read(path: Path) -> bytes:

@@ -26,10 +26,10 @@ protocol's own first round trip, so authentication costs no extra radio turn:
   exist a 16-byte HMAC-SHA256 under a key derived from the sender's direction key; before,
   an Ed25519 signature over the request's hash and the code (64 bytes).  Only the two
   parties can end a run (the link ignores an ABORT without a proof that checks,
-  :meth:`companion.link.LinkEndpoint.secure`).
+  :meth:`companion.radio.LinkEndpoint.secure`).
 * ``boot`` is the responder's per-start nonce; with his public protocol keys it is what his
-  signed beacons' keys hash covers (:func:`companion.beacon.keys_hash`): the initiator checks
-  the keys of the run against the keys he announced.
+  signed beacons' keys hash covers (:func:`companion.neighbours.beacon.keys_hash`): the initiator
+  checks the keys of the run against the keys he announced.
 
 Errors: anything wrong with an authenticated message raises :class:`AuthenticationError` (a
 :class:`~protocol.errors.RemoteProtocolError`); nothing else escapes.
@@ -49,10 +49,9 @@ from cryptography.hazmat.primitives.asymmetric.x25519 import X25519PrivateKey, X
 from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
 from cryptography.hazmat.primitives.kdf.hkdf import HKDF
 
+from companion.auth.certificate import Certificate
+from companion.auth.keys import FINGERPRINT_SIZE, SIGNATURE_SIZE, SigningKey
 from protocol.errors import RemoteProtocolError
-
-from .certificate import Certificate
-from .keys import FINGERPRINT_SIZE, SIGNATURE_SIZE, SigningKey
 
 CONTEXT = b"pdc/session/v1/"
 INIT, ACCEPT, REFUSE = 1, 2, 3

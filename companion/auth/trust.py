@@ -5,7 +5,7 @@ store, is valid now and names the node it speaks from.  Everybody else -- a stra
 radio, a drone of an operator we have no agreement with, an expired certificate -- is
 ignored (:class:`UnknownPeers` says whether the companion also reports it).  Each operator
 carries its own limits: how many segments a run of its drones may have, how many runs per
-hour its drones may ask of us together (``companion.budget``).
+hour its drones may ask of us together (``companion.runs.budget``).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import enum
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from .certificate import Certificate
-from .keys import PublicKey
+from companion.auth.certificate import Certificate
+from companion.auth.keys import PublicKey
 
 
 class UnknownPeers(enum.Enum):

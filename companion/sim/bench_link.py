@@ -5,7 +5,8 @@ by :mod:`protocol.tools.paper_data`) or, without it, 30 random pairs of the same
 the OT setup cached and at first contact, and one random size x size case, each through
 :func:`~.over_link.link_case` on the virtual clock; medians per run of frames, bytes on the
 air, authentication bytes, airtime, simulated time and both parties' CPU.  Also each profile's
-frame sizes and header share, and what beacons cost (:func:`companion.beacon_budget.beacon_costs`).
+frame sizes and header share, and what beacons cost
+(:func:`companion.neighbours.beacon_airtime.beacon_costs`).
 """
 
 from __future__ import annotations
@@ -18,21 +19,16 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from protocol.grid import GridKind, GridSpec
+from companion.neighbours.beacon_airtime import beacon_costs
+from companion.radio import PROFILES, LinkProfile, profile
+from companion.radio.frames import OVERHEAD
+from companion.sim.medium import Impairments
+from companion.sim.over_link import duration_text, link_case
+from protocol.geo.grid import GridKind, GridSpec
+from protocol.messages import Suite
 from protocol.tools.bench_paths import random_pairs, random_path
 from protocol.tools.compare import Case, Party
 from protocol.tools.paper_data import load_paper_data
-from protocol.wire import Suite
-
-from ..beacon_budget import beacon_costs
-from ..link import (
-    PROFILES,
-    Impairments,
-    LinkProfile,
-    profile,
-)
-from ..link.frames import OVERHEAD
-from .over_link import duration_text, link_case
 
 LOSSES = (0.0, 0.1, 0.3)
 

@@ -20,12 +20,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from xml.etree import ElementTree as ET
 
+from companion.sim.vehicles import Track
 from protocol.tools import cli
 
-from .vehicles import Track
-
 if TYPE_CHECKING:
-    from .replay import Replay
+    from companion.sim.replay import Replay
 
 KML_NS = "http://www.opengis.net/kml/2.2"
 COLOURS = ("ff1f77b4", "ff0e7fff", "ff2ca02c", "ff2827d6", "ffbd6794", "ff4b568c")  # aabbggrr

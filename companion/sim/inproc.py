@@ -3,10 +3,10 @@
 :class:`InProcessVehicle` is the mock autopilot (:class:`~companion.sim.mock_autopilot.
 MockAutopilot`: the same mission store, the firmware's personality, the same flight model)
 with no MAVLink link; :class:`InProcessAutopilot` is what the companion asks of it
-(:class:`~companion.autopilot.AutopilotBase`) answered by reading and calling that mock
+(:class:`~companion.mission.autopilot.AutopilotBase`) answered by reading and calling that mock
 directly instead of through MAVSDK.  Everything then runs in one event loop -- vehicles,
 companions, the simulated radio -- so a replay can run on a virtual clock
-(:class:`~companion.link.clock.VirtualTimeLoop`): minutes of flight in seconds, the same on a
+(:class:`~companion.radio.clock.VirtualTimeLoop`): minutes of flight in seconds, the same on a
 busy machine as on an idle one, and many drones at once.  What it leaves out is MAVLink and
 MAVSDK themselves (transfers, their latency and their faults): the replays over MAVSDK
 (:mod:`companion.sim.replay` without ``virtual``) keep those.
@@ -17,11 +17,11 @@ from __future__ import annotations
 from collections.abc import AsyncIterator, Callable, Sequence
 from typing import TypeVar
 
-from ..autopilot import AutopilotBase, AutopilotError, Position, Timeouts
-from ..link.clock import Clock
-from ..mission import MissionError, MissionItem, normalise
-from .mock_autopilot import FlightModel, MockAutopilot
-from .vehicles import MockVehicle
+from companion.mission.autopilot import AutopilotBase, AutopilotError, Position, Timeouts
+from companion.mission.items import MissionError, MissionItem, normalise
+from companion.radio.clock import Clock
+from companion.sim.mock_autopilot import FlightModel, MockAutopilot
+from companion.sim.vehicles import MockVehicle
 
 ON_CHANGE_S = 0.5  # link seconds between looks at a state reported on change (armed, ...)
 T = TypeVar("T")

@@ -17,20 +17,26 @@ from __future__ import annotations
 
 import math
 
-from protocol.geodesy import ground_offset
-from protocol.geometry import path_hits
-from protocol.grid import GridSpec
-from protocol.volumes import Route, Separation, route_hits
-
-from ..autopilots import personality
-from ..beacon import UNAUTHENTICATED_SIZE
-from ..events import RUN_ENDS
-from ..events import EventKind as K
-from ..mission import MissionItem, point_as_segment
-from ..runtime import Companion
-from .report import AuthCost, DroneReport, EditStatus, LinkInfo, PairReport, ReplayReport
-from .scenario import Scenario
-from .vehicles import ReplayVehicle, Track
+from companion.app.runtime import Companion
+from companion.events import RUN_ENDS
+from companion.events import EventKind as K
+from companion.mission.items import MissionItem, point_as_segment
+from companion.mission.personalities import personality
+from companion.neighbours.beacon import UNAUTHENTICATED_SIZE
+from companion.sim.report import (
+    AuthCost,
+    DroneReport,
+    EditStatus,
+    LinkInfo,
+    PairReport,
+    ReplayReport,
+)
+from companion.sim.scenario import Scenario
+from companion.sim.vehicles import ReplayVehicle, Track
+from protocol.geo.geodesy import ground_offset
+from protocol.geo.geometry import path_hits
+from protocol.geo.grid import GridSpec
+from protocol.geo.volumes import Route, Separation, route_hits
 
 REPORT_RADIUS_M = 50_000.0  # the report's own grid (plain predicate only): any encounter fits
 

@@ -7,8 +7,8 @@ GLOBAL_POSITION_INT telemetry of the kinematic flight (:mod:`companion.sim.mock_
 which flies the stored mission in simulated time, DO_JUMP loops included.  This module is
 the MAVLink endpoint.  Links as PX4 SITL (:mod:`companion.sim.mock_links`): instance i has an
 API link (binds 14580+i, sends to 14540+i) and a GCS link (binds 18570+i, sends to 14550),
-system id i+1.  The firmware's personality (:mod:`companion.autopilots`) decides which items
-are refused, how they are stored, and where an upload leaves the current item (PX4: at the
+system id i+1.  The firmware's personality (:mod:`companion.mission.personalities`) decides which
+items are refused, how they are stored, and where an upload leaves the current item (PX4: at the
 item marked current in the upload, in flight too; ArduPilot: where it was).  Faults can be
 injected (dropped replies, latency, ignored messages, rejected uploads, vanishing).
 """
@@ -24,13 +24,13 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from ..link.clock import Clock
-from ..mission import MissionItem
-from ..tasks import spawn
-from . import mock_links as wire
-from .mock_flight import FlightModel, MockFlight
-from .mock_links import PX4_BIND, PX4_GCS_BIND, PX4_GCS_SEND, PX4_SEND, Faults, Link
-from .mock_missions import item_message
+from companion.mission.items import MissionItem
+from companion.radio.clock import Clock
+from companion.sim import mock_links as wire
+from companion.sim.mock_flight import FlightModel, MockFlight
+from companion.sim.mock_links import PX4_BIND, PX4_GCS_BIND, PX4_GCS_SEND, PX4_SEND, Faults, Link
+from companion.sim.mock_missions import item_message
+from companion.tasks import spawn
 
 __all__ = ["PX4_BIND", "PX4_SEND", "Faults", "FlightModel", "MockAutopilot", "item_message"]
 log = logging.getLogger(__name__)

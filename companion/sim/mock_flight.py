@@ -1,9 +1,10 @@
 """The mock autopilot's flight: the stored mission flown by the product's flight model.
 
-In simulated seconds of its clock, the vehicle flies as :class:`companion.flight_model.Flight`
-says PX4 does (take-off climb, 3-D legs with altitude ramps, speeding up and slowing down,
-corners, loiter times, DO_JUMP loops as the firmware counts them, landing at LAND and at the
-end of RTL, a hover at the end of the mission) -- the same model the companion predicts its
+In simulated seconds of its clock, the vehicle flies as
+:class:`companion.mission.flight_model.Flight` says PX4 does (take-off climb, 3-D legs with
+altitude ramps, speeding up and slowing down, corners, loiter times, DO_JUMP loops as the firmware
+counts them, landing at LAND and at the end of RTL, a hover at the end of the mission) -- the same
+model the companion predicts its
 windows and bands from.  A new mission leaves the current item where the firmware would (PX4:
 at the item the upload marks current, in flight too; ArduPilot: where it was, item 1 on the
 ground).  What the vehicle reports goes out through its MAVLink endpoint
@@ -16,12 +17,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ..autopilots import personality
-from ..flight_model import Flight, Kinematics
-from ..link.clock import Clock
-from ..mission import MissionItem
-from .mock_links import Faults
-from .mock_missions import MissionServer
+from companion.mission.flight_model import Flight, Kinematics
+from companion.mission.items import MissionItem
+from companion.mission.personalities import personality
+from companion.radio.clock import Clock
+from companion.sim.mock_links import Faults
+from companion.sim.mock_missions import MissionServer
 
 
 @dataclass(frozen=True)

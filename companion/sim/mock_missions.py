@@ -22,9 +22,9 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from ..autopilots import Firmware, Personality
-from ..mission import FRAMES_GLOBAL, MissionItem
-from .mock_links import Faults, Link
+from companion.mission.items import FRAMES_GLOBAL, MissionItem
+from companion.mission.personalities import Firmware, Personality
+from companion.sim.mock_links import Faults, Link
 
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
 MISSION_TYPE_ALL = mavlink.MAV_MISSION_TYPE_ALL  # 255: CLEAR_ALL of every type

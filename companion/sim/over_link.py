@@ -21,30 +21,22 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from protocol.grid import GridSpec
-from protocol.intersection import Limits
+from companion.auth.session import Identity, Init, Initiator, Responder, Route
+from companion.mission.files import read_mission_file
+from companion.mission.flightpath import flight_path
+from companion.mission.items import MissionError
+from companion.radio import PROFILES, Clock, LinkConfig, LinkEndpoint, LinkProfile
+from companion.runs.exchange import RunReport, run_alice, serve_bob
+from companion.sim.fleet import make_fleet
+from companion.sim.medium import Channel, Impairments, SimMedium
+from companion.sim.virtual_time import run_simulated
+from companion.tasks import spawn
+from protocol.geo.grid import GridSpec
+from protocol.messages import Suite
+from protocol.run import Limits
 from protocol.tools.compare import Case, Party, compare
+from protocol.tools.demo import ALICE_MISSION, BOB_MISSION, HOME_LAT, HOME_LON
 from protocol.tools.formats import InputFormatError
-from protocol.wire import Suite
-
-from ..auth.session import Identity, Init, Initiator, Responder, Route
-from ..exchange import RunReport, run_alice, serve_bob
-from ..flightpath import flight_path
-from ..link import (
-    PROFILES,
-    Channel,
-    Clock,
-    Impairments,
-    LinkConfig,
-    LinkEndpoint,
-    LinkProfile,
-    SimMedium,
-    run_simulated,
-)
-from ..mission import MissionError
-from ..missionfile import read_mission_file
-from ..tasks import spawn
-from .fleet import make_fleet
 
 ALICE_NODE, BOB_NODE = 1, 2
 log = logging.getLogger(__name__)
@@ -170,7 +162,7 @@ def duration_text(seconds: float) -> str:
 
 def flown_points(path: Path) -> tuple[tuple[int, int], ...]:
     """The ground path a mission file flies (degE7), from its home: the one model
-    (:mod:`companion.flightpath`) the companion compares in flight.  File errors are
+    (:mod:`companion.mission.flightpath`) the companion compares in flight.  File errors are
     :class:`InputFormatError` (exit 2)."""
     try:
         mission = read_mission_file(path)
@@ -217,8 +209,6 @@ def compare_over_link(
 
 def radio_demo(profiles: Sequence[str] = ("eu868-sf7", "us915-sf7"), loss: float = 0.1) -> int:
     """The demo's two missions once more, through the simulated radio (``make demo``)."""
-    from protocol.tools.demo import ALICE_MISSION, BOB_MISSION, HOME_LAT, HOME_LON
-
     grid = GridSpec.geo(HOME_LAT, HOME_LON, radius_m=2000)
     case = Case.of(grid.project_path(ALICE_MISSION), BOB_MISSION, grid, bob_geographic=True)
     party = Party.generate(Suite.COMPACT)

@@ -1,7 +1,7 @@
 """A replay's clock that only runs while the replay's process runs.
 
 A replay flies mock vehicles, companions and the simulated radio in one event loop at a time
-scale (30x: one real second is thirty link seconds).  On :class:`~companion.link.clock.Clock`
+scale (30x: one real second is thirty link seconds).  On :class:`~companion.radio.clock.Clock`
 link time is the loop's clock times the scale, so every moment the process waits for a CPU --
 a busy machine, another test beside it -- passes as thirty times as much flight and radio time
 in which nobody could act: runs overrun, the fail-safe climbs, outcomes depend on the load.
@@ -22,7 +22,7 @@ import contextlib
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any, TypeVar
 
-from ..link.clock import Clock
+from companion.radio.clock import Clock
 
 T = TypeVar("T")
 

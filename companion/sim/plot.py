@@ -6,10 +6,10 @@ import itertools
 import math
 from pathlib import Path
 
-from .metrics import closest, enu
-from .replay import Replay
-from .scenario import ScenarioError
-from .vehicles import Track
+from companion.sim.metrics import closest, enu
+from companion.sim.replay import Replay
+from companion.sim.scenario import ScenarioError
+from companion.sim.vehicles import Track
 
 MARKERS = {
     "run_started": ("^", "run started"),

@@ -4,8 +4,9 @@ or, in virtual time, mock vehicles in this process (:mod:`companion.sim.inproc`)
 ``drone-deconflict replay SCENARIO.toml``.  Each drone of the scenario
 (:mod:`companion.sim.scenario`) gets a :class:`~companion.sim.mock_autopilot.MockAutopilot` on
 loopback UDP (or a PX4 SITL vehicle, :mod:`companion.sim.px4`), a
-:class:`~companion.autopilot.Autopilot` (MAVSDK) and a :class:`~companion.runtime.Companion` on
-the shared simulated channel.  The missions are flown in scaled time (mocks: on a paced clock,
+:class:`~companion.mission.autopilot.Autopilot` (MAVSDK) and a
+:class:`~companion.app.runtime.Companion` on the shared simulated channel.  The missions are flown
+in scaled time (mocks: on a paced clock,
 :mod:`companion.sim.paced_clock`) until every drone has finished or the time limit passes.  A
 baseline without companions (same missions, same schedule, the same flight model stepped
 offline) gives the separations one would have had; :mod:`companion.sim.metrics` measures both
@@ -24,25 +25,26 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..autopilot import Autopilot, AutopilotBase
-from ..autopilots import personality
-from ..events import Event, EventKind
-from ..failsafe import FailsafeSettings
-from ..link import Channel, Clock, Impairments, LinkEndpoint, SimMedium, profile, run_simulated
-from ..link.clock import VirtualTimeLoop
-from ..planner import OffsetSettings
-from ..runtime import Companion, CompanionSettings
-from ..schedule import SeparationSettings
-from ..tasks import spawn
-from .fleet import make_fleet
-from .inproc import InProcessVehicle
-from .metrics import build_report
-from .mock_autopilot import Faults, FlightModel, MockAutopilot
-from .paced_clock import PacedClock
-from .px4 import Px4Build
-from .report import ReplayReport
-from .scenario import Scenario, ScenarioError
-from .vehicles import MockVehicle, Px4SitlVehicle, ReplayVehicle, Track
+from companion.app.runtime import Companion, CompanionSettings
+from companion.events import Event, EventKind
+from companion.mission.autopilot import Autopilot, AutopilotBase
+from companion.mission.personalities import personality
+from companion.mission.planner import OffsetSettings
+from companion.mission.schedule import SeparationSettings
+from companion.radio import Clock, LinkEndpoint, profile
+from companion.runs.failsafe import FailsafeSettings
+from companion.sim.fleet import make_fleet
+from companion.sim.inproc import InProcessVehicle
+from companion.sim.medium import Channel, Impairments, SimMedium
+from companion.sim.metrics import build_report
+from companion.sim.mock_autopilot import Faults, FlightModel, MockAutopilot
+from companion.sim.paced_clock import PacedClock
+from companion.sim.px4 import Px4Build
+from companion.sim.report import ReplayReport
+from companion.sim.scenario import Scenario, ScenarioError
+from companion.sim.vehicles import MockVehicle, Px4SitlVehicle, ReplayVehicle, Track
+from companion.sim.virtual_time import VirtualTimeLoop, run_simulated
+from companion.tasks import spawn
 
 log = logging.getLogger(__name__)
 # SIH lock-step speed factor for two PX4 vehicles, their companions and the protocol on 2
@@ -163,7 +165,7 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
 
 def run_virtual(scenario: Scenario, *, progress: bool = False) -> Replay:
     """Fly ``scenario`` in virtual time (:func:`run_replay` with ``virtual``, on its own
-    :class:`~companion.link.clock.VirtualTimeLoop`)."""
+    :class:`~companion.radio.clock.VirtualTimeLoop`)."""
     return run_simulated(run_replay(scenario, progress=progress, virtual=True))
 
 
@@ -179,7 +181,7 @@ async def run_replay(
     build ``px4`` (their speed factor, and so the replay's time scale, at most
     ``px4_speed_max``), or -- ``virtual`` -- mock vehicles in this process
     (:mod:`companion.sim.inproc`) on a virtual clock (run it on a
-    :class:`~companion.link.clock.VirtualTimeLoop`: :func:`run_virtual`)."""
+    :class:`~companion.radio.clock.VirtualTimeLoop`: :func:`run_virtual`)."""
     if virtual and px4 is not None:
         raise ScenarioError("PX4 SITL runs in real time: no virtual replay with it")
     if virtual and not isinstance(asyncio.get_running_loop(), VirtualTimeLoop):

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
-from ..events import FAILURES
+from companion.events import FAILURES
 
 VEHICLE_NAMES = {
     ("mock", "px4"): "px4",

@@ -1,4 +1,4 @@
-"""Replay scenarios: a TOML file read and checked whole (:mod:`companion.tables`).
+"""Replay scenarios: a TOML file read and checked whole (:mod:`companion.app.tables`).
 
 A scenario::
 
@@ -27,14 +27,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..auth.trust import UnknownPeers
-from ..failsafe import Action
-from ..flightpath import FlightPath, flight_path
-from ..link.airtime import PROFILES
-from ..mission import MissionError, MissionItem
-from ..missionfile import read_mission_file
-from ..tables import Table, TableError, load_toml
-from .mock_links import Faults
+from companion.app.tables import Table, TableError, load_toml
+from companion.auth.trust import UnknownPeers
+from companion.mission.files import read_mission_file
+from companion.mission.flightpath import FlightPath, flight_path
+from companion.mission.items import MissionError, MissionItem
+from companion.radio.airtime import PROFILES
+from companion.runs.failsafe import Action
+from companion.sim.mock_links import Faults
 
 MAX_TIME_SCALE = 10_000.0  # simulated seconds per real second: lossy_sf9 flies at 2000
 MAX_LOSS = 0.9  # more loss than this and no run ends: a scenario for nothing
@@ -92,7 +92,7 @@ class Scenario:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read and check a scenario file whole (:mod:`companion.tables`): every number finite
+    """Read and check a scenario file whole (:mod:`companion.app.tables`): every number finite
     and in range, every mission readable, no unknown key."""
     path = Path(path)
     doc = Table(load_toml(path, ScenarioError), str(path), ScenarioError)

@@ -12,12 +12,12 @@ import contextlib
 import logging
 from typing import Protocol
 
-from ..link.clock import Clock
-from ..mission import MissionItem
-from ..tasks import spawn
-from .mock_autopilot import Faults, FlightModel, MockAutopilot
-from .px4 import Px4Build, Px4Error, Px4Vehicle
-from .px4.link import PX4_AUTO_LOITER, PX4_AUTO_MISSION, PX4_MODE_AUTO
+from companion.mission.items import MissionItem
+from companion.radio.clock import Clock
+from companion.sim.mock_autopilot import Faults, FlightModel, MockAutopilot
+from companion.sim.px4 import Px4Build, Px4Error, Px4Vehicle
+from companion.sim.px4.link import PX4_AUTO_LOITER, PX4_AUTO_MISSION, PX4_MODE_AUTO
+from companion.tasks import spawn
 
 Track = list[tuple[float, float, float, float]]  # (simulated s, lat, lon, alt AMSL)
 RESOLVED_TOLERANCE_M = 0.5  # two mocks: a pair is resolved at the offset minus this

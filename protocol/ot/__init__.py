@@ -16,6 +16,6 @@ kappa -- and hashing gives
 *random OTs*: Alice holds keys (K_i^0, K_i^1), Bob a random choice c_i and K_i^{c_i}.
 
 Random OTs are consumed in a fixed public order (the run's plan) by the
-sub-protocols built on them: OT-based products (:mod:`protocol.products`), the comparison
-leaves (:mod:`protocol.millionaire`) and Beaver triples (:mod:`protocol.gmw`).
+sub-protocols built on them: OT-based products (:mod:`protocol.compact.products`), the comparison
+leaves (:mod:`protocol.compact.millionaire`) and Beaver triples (:mod:`protocol.compact.gmw`).
 """

@@ -21,10 +21,10 @@ from __future__ import annotations
 import secrets
 from collections.abc import Sequence
 
-from .. import secp256k1 as ec
-from ..encoding import Reader
-from ..errors import LocalProtocolError, RemoteProtocolError
-from .hashing import base_key
+from protocol.errors import LocalProtocolError, RemoteProtocolError
+from protocol.ot.hashing import base_key
+from protocol.primitives import secp256k1 as ec
+from protocol.wire.encoding import Reader
 
 H = ec.hash_to_point(b"pdc/ot/base/h", b"")
 

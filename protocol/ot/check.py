@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import ConsistencyError, RemoteProtocolError
+from protocol.errors import ConsistencyError, RemoteProtocolError
 
 Bytes = npt.NDArray[np.uint8]
 STATISTICAL = 40  # the extra OTs beyond kappa: x is within 2^-40 of uniform

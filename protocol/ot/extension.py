@@ -30,10 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import LocalProtocolError, RemoteProtocolError
-from . import check
-from .hashing import KEY_SIZE, prg, rot_key
-from .setup import ChooserSetup, HolderSetup
+from protocol.errors import LocalProtocolError, RemoteProtocolError
+from protocol.ot import check
+from protocol.ot.hashing import KEY_SIZE, prg, rot_key
+from protocol.ot.setup import ChooserSetup, HolderSetup
 
 Bytes = npt.NDArray[np.uint8]
 MAX_OTS = 1 << 24

@@ -15,9 +15,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..encoding import Reader
-from ..errors import LocalProtocolError
-from .hashing import KEY_SIZE, ggm_children
+from protocol.errors import LocalProtocolError
+from protocol.ot.hashing import KEY_SIZE, ggm_children
+from protocol.wire.encoding import Reader
 
 
 def _xor(a: bytes, b: bytes) -> bytes:

@@ -23,11 +23,11 @@ import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from .. import secp256k1 as ec
-from ..encoding import Reader
-from ..errors import LocalProtocolError, RemoteProtocolError
-from .base import BaseReceiver, BaseSender
-from .pprf import correction_size, expand_full, expand_punctured
+from protocol.errors import LocalProtocolError, RemoteProtocolError
+from protocol.ot.base import BaseReceiver, BaseSender
+from protocol.ot.pprf import correction_size, expand_full, expand_punctured
+from protocol.primitives import secp256k1 as ec
+from protocol.wire.encoding import Reader
 
 SECURITY_LEVELS = (112, 128)  # kappa: bits of Delta = base OTs
 DEFAULT_SECURITY = 112

@@ -4,8 +4,9 @@ CPU time is ``time.process_time`` (this process only), reported as medians.  Byt
 lengths of the real serialised messages (:mod:`protocol.loopback`), never object sizes.  Alice
 always works with public keys decoded from Bob's bytes, so her noise is computed the public (slow)
 way, as on a real drone.  Both suites' comparisons run through the same sub-machines the path
-protocol ships (:class:`~protocol.comparison.ComparisonAlice` for the paper suite;
-:mod:`protocol.millionaire` and :mod:`protocol.gmw` on :mod:`protocol.ot` for the compact one).
+protocol ships (:class:`~protocol.paper.comparison.ComparisonAlice` for the paper suite;
+:mod:`protocol.compact.millionaire` and :mod:`protocol.compact.gmw` on :mod:`protocol.ot` for the
+compact one).
 """
 
 from __future__ import annotations
@@ -17,15 +18,15 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from .. import secp256k1 as ec
-from ..comparison import ComparisonAlice, ComparisonBob, pack_differences
-from ..dgk import DGKPrivateKey, DGKPublicKey
-from ..millionaire import DEFAULT_DIGIT_BITS, Shape
-from ..ot.extension import chooser_extend, holder_extend
-from ..ot.setup import DEFAULT_BLOCKS, ChooserSetup, HolderSetup, describe
-from ..paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
-from ..params import SecurityParameters
-from .loopback import Transcript, run_comparison, run_millionaires, run_ot_setup
+from protocol.compact.millionaire import DEFAULT_DIGIT_BITS, Shape
+from protocol.ot.extension import chooser_extend, holder_extend
+from protocol.ot.setup import DEFAULT_BLOCKS, ChooserSetup, HolderSetup, describe
+from protocol.paper.comparison import ComparisonAlice, ComparisonBob, pack_differences
+from protocol.primitives import secp256k1 as ec
+from protocol.primitives.dgk import DGKPrivateKey, DGKPublicKey
+from protocol.primitives.paillier import PaillierCiphertext, PaillierPrivateKey, PaillierPublicKey
+from protocol.primitives.params import SecurityParameters
+from protocol.tools.loopback import Transcript, run_comparison, run_millionaires, run_ot_setup
 
 Row = dict[str, Any]
 

@@ -16,17 +16,17 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .. import keyproof
-from ..geometry import Point
-from ..grid import GridKind, GridSpec
-from ..intersection import Alice, Bob
-from ..ot import check
-from ..ot.setup import DEFAULT_SECURITY
-from ..volumes import NO_SEPARATION, Separation, VolumeSpec
-from ..wire import Suite
-from .compare import Case, Party, describe_once, params_of, run_case
-from .loopback import run_paths
-from .paper_data import load_paper_data
+from protocol.geo.geometry import Point
+from protocol.geo.grid import GridKind, GridSpec
+from protocol.geo.volumes import NO_SEPARATION, Separation, VolumeSpec
+from protocol.intersection import Alice, Bob
+from protocol.messages import Suite
+from protocol.ot import check
+from protocol.ot.setup import DEFAULT_SECURITY
+from protocol.paper import keyproof
+from protocol.tools.compare import Case, Party, describe_once, params_of, run_case
+from protocol.tools.loopback import run_paths
+from protocol.tools.paper_data import load_paper_data
 
 # Quoted, not measured here: the paper's published figures, and its code as the project's
 # field notes measured it.
@@ -44,7 +44,7 @@ class CheckCost:
     """The CPU malicious security takes in the runs made while it is active: the OT
     consistency check (Bob's reply, Alice's check) and Alice's check of Bob's Paillier key
     proof -- the real calls of the run, timed.  A tool's instrument: it wraps
-    :mod:`protocol.ot.check` and :func:`protocol.keyproof.verify` for the duration."""
+    :mod:`protocol.ot.check` and :func:`protocol.paper.keyproof.verify` for the duration."""
 
     # (module, function, whose CPU it is)
     TIMED = ((check, "respond", "bob"), (check, "verify", "alice"), (keyproof, "verify", "alice"))

@@ -28,7 +28,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import NoReturn
 
-from ..errors import ProtocolError
+from protocol.errors import ProtocolError
 
 EXIT_OK, EXIT_NEGATIVE, EXIT_INPUT, EXIT_BUG = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130

@@ -17,10 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..geometry import Point
-from ..grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
-from ..intersection import Alice, Bob, BobKeys, Limits
-from ..ot.setup import (
+from protocol.geo.geometry import Point
+from protocol.geo.grid import DEFAULT_RADIUS_M, DEFAULT_RESOLUTION_MM, GridKind, GridSpec
+from protocol.geo.volumes import CROSSING, NO_SEPARATION, Route, Separation, VolumeSpec, route_hits
+from protocol.intersection import Alice, Bob
+from protocol.messages import Suite
+from protocol.ot.setup import (
     DEFAULT_BLOCK_BITS,
     DEFAULT_SECURITY,
     ChooserSetup,
@@ -28,10 +30,10 @@ from ..ot.setup import (
     describe,
     split_blocks,
 )
-from ..volumes import CROSSING, NO_SEPARATION, Route, Separation, VolumeSpec, route_hits
-from ..wire import Suite
-from .formats import InputFormatError, parse_paper_text, read_text, route_of
-from .loopback import run_ot_setup, run_paths
+from protocol.paper.keys import BobKeys
+from protocol.run import Limits
+from protocol.tools.formats import InputFormatError, parse_paper_text, read_text, route_of
+from protocol.tools.loopback import run_ot_setup, run_paths
 
 SUITES = {"compact": Suite.COMPACT, "paper": Suite.PAPER}
 
@@ -93,7 +95,8 @@ class Case:
 
 GeoPath = tuple[tuple[int, int], ...]
 # Reads a mission file into the ground path its autopilot flies (degE7); the companion's
-# ``companion.flightpath`` knows how (launch leg, loiters, DO_JUMP, RTL), this package does not.
+# ``companion.mission.flightpath`` knows how (launch leg, loiters, DO_JUMP, RTL), this package does
+# not.
 MissionReader = Callable[[Path], GeoPath]
 
 

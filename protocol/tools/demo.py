@@ -10,11 +10,11 @@ answer next to the plaintext predicate (which neither drone could compute alone)
 
 from __future__ import annotations
 
-from ..geometry import path_hits
-from ..grid import GridSpec
-from ..intersection import Alice, Bob
-from ..ot.setup import ChooserSetup
-from .loopback import run_paths
+from protocol.geo.geometry import path_hits
+from protocol.geo.grid import GridSpec
+from protocol.intersection import Alice, Bob
+from protocol.ot.setup import ChooserSetup
+from protocol.tools.loopback import run_paths
 
 HOME_LAT, HOME_LON = 473_977_420, 85_455_940  # PX4 SITL default home (degE7)
 # Alice surveys east-west legs; Bob flies a north-south transit through her second leg.

@@ -5,7 +5,7 @@ A line may give every vertex an altitude, ``(x,y,z)``, or an altitude and a time
 
 Mission files (QGroundControl ``.plan``, ``QGC WPL``) are not read here: the ground path a
 mission flies (launch leg, loiter circles, DO_JUMP loops, RTL) is the companion's one model,
-``companion.flightpath``; ``python -m companion compare`` reads them with it.
+``companion.mission.flightpath``; ``python -m companion compare`` reads them with it.
 
 Malformed input raises :class:`InputFormatError` naming the file and line.
 """
@@ -17,8 +17,8 @@ import re
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..errors import LocalProtocolError
-from ..volumes import Route
+from protocol.errors import LocalProtocolError
+from protocol.geo.volumes import Route
 
 _POINT = re.compile(r"\(\s*(-?\d+(?:\s*,\s*-?\d+){1,3})\s*\)")
 _LINE = re.compile(r"^(\s*\(\s*-?\d+(?:\s*,\s*-?\d+){1,3}\s*\)\s*)+$")

@@ -14,20 +14,20 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import TypeVar
 
-from ..comparison import (
+from protocol.compact.gmw import Gmw, rot_count
+from protocol.compact.millionaire import LeavesAlice, LeavesBob, Shape, comparison_circuit
+from protocol.intersection import Alice, Bob
+from protocol.messages import MsgType
+from protocol.ot.extension import ChooserRots, HolderRots, chooser_extend, holder_extend
+from protocol.ot.setup import ChooserSetup, HolderSetup, HolderSetupStart, chooser_setup
+from protocol.paper.comparison import (
     BitDecompositions,
     BlindedTests,
     ComparisonAlice,
     ComparisonBob,
     MaskedDifferences,
 )
-from ..encoding import Reader
-from ..gmw import Gmw, rot_count
-from ..intersection import Alice, Bob
-from ..millionaire import LeavesAlice, LeavesBob, Shape, comparison_circuit
-from ..ot.extension import ChooserRots, HolderRots, chooser_extend, holder_extend
-from ..ot.setup import ChooserSetup, HolderSetup, HolderSetupStart, chooser_setup
-from ..wire import MsgType
+from protocol.wire.encoding import Reader
 
 T = TypeVar("T")
 

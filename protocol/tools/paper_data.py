@@ -16,10 +16,10 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..grid import GridKind, GridSpec
-from ..volumes import NO_SEPARATION, Separation
-from .compare import Case, load_cases
-from .formats import InputFormatError, read_text
+from protocol.geo.grid import GridKind, GridSpec
+from protocol.geo.volumes import NO_SEPARATION, Separation
+from protocol.tools.compare import Case, load_cases
+from protocol.tools.formats import InputFormatError, read_text
 
 PAIR_FILES = ("alices_segments.txt", "bobs_segments.txt")
 ROUTES = range(1, 6)

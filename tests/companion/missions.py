@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from companion.mission import MissionItem
+from companion.mission.items import MissionItem
 
 HOME = (47.397742, 8.545594, 488.0)
 

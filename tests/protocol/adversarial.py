@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from protocol.geometry import Point
+from protocol.geo.geometry import Point
 
 Pair = tuple[Point, Point, Point, Point]
 

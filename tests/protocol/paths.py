@@ -5,12 +5,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from protocol.geometry import Point
-from protocol.grid import GridKind, GridSpec
-from protocol.intersection import Alice, Bob, Limits, State
+from protocol.geo.geometry import Point
+from protocol.geo.grid import GridKind, GridSpec
+from protocol.geo.volumes import Route
+from protocol.intersection import Alice, Bob
+from protocol.messages import Suite
+from protocol.run import Limits, State
 from protocol.tools.loopback import Transcript, run_paths
-from protocol.volumes import Route
-from protocol.wire import Suite
 
 GRID = GridSpec(GridKind.PLANE, 99)
 

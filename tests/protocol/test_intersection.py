@@ -9,16 +9,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from protocol.errors import InputRangeError, LocalProtocolError, RemoteProtocolError
-from protocol.geometry import Point, pad_path, path_hits
-from protocol.grid import GridKind, GridSpec
-from protocol.intersection import Alice, Bob, Limits, State
+from protocol.geo.geometry import Point, pad_path, path_hits
+from protocol.geo.grid import GridKind, GridSpec
+from protocol.intersection import Alice, Bob
+from protocol.messages import Suite
+from protocol.run import Limits, State
 from protocol.tools.loopback import run_paths
 from protocol.tools.paper_data import load_paper_data
-from protocol.wire import Suite
-
-from ..paper_shaped import PaperShaped
-from .adversarial import ADVERSARIAL, R
-from .paths import GRID, machines, run
+from tests.paper_shaped import PaperShaped
+from tests.protocol.adversarial import ADVERSARIAL, R
+from tests.protocol.paths import GRID, machines, run
 
 
 @pytest.mark.parametrize(("name", "pair"), ADVERSARIAL, ids=[n for n, _ in ADVERSARIAL])
@@ -253,8 +253,8 @@ def test_suite_choice(keys: Any) -> None:
 
 
 def test_oversized_peer_keys_are_refused(keys: Any) -> None:
-    from protocol.suite_paper import read_dgk_key
-    from protocol.wire import MsgType, frame, put_blob
+    from protocol.messages import MsgType, frame, put_blob
+    from protocol.paper.suite import read_dgk_key
 
     with pytest.raises(RemoteProtocolError, match="4096"):
         read_dgk_key(bytes([1]) * (3 * 1024 + 5), False)
@@ -270,7 +270,7 @@ def test_oversized_peer_keys_are_refused(keys: Any) -> None:
     ("m", "n", "fresh"), [(1, 1, True), (2, 1, False), (4, 4, False), (3, 5, True)]
 )
 def test_message_sizes_are_known_before_the_run(m: int, n: int, fresh: bool, ot_pair: Any) -> None:
-    from protocol.compact_plan import message_sizes
+    from protocol.compact.plan import message_sizes
 
     grid = GridSpec(GridKind.PLANE, 2000)
     alice_path = tuple((i * 7, (i * 13) % 50) for i in range(m + 1))

@@ -17,15 +17,14 @@ from typing import Any
 
 import pytest
 
-import protocol.products as products_module
-from protocol.bitpack import unpack_bits
-from protocol.grid import GridKind, GridSpec
+import protocol.compact.products as products_module
+from protocol.geo.grid import GridKind, GridSpec
+from protocol.geo.volumes import SEPARATION_SIZE
 from protocol.intersection import Alice, Bob
+from protocol.messages import HEADER_SIZE, NONCE_SIZE
 from protocol.tools.loopback import run_paths
-from protocol.volumes import SEPARATION_SIZE
-from protocol.wire import HEADER_SIZE, NONCE_SIZE
-
-from .test_privacy import chi2_rejects, ks_rejects
+from protocol.wire.bitpack import unpack_bits
+from tests.protocol.test_privacy import chi2_rejects, ks_rejects
 
 RUNS = 60
 GRID = GridSpec(GridKind.PLANE, 99)

@@ -16,7 +16,7 @@ from typing import cast
 
 import pytest
 
-from protocol.comparison import (
+from protocol.paper.comparison import (
     ComparisonAlice,
     ComparisonBob,
     PackedValues,
@@ -24,8 +24,7 @@ from protocol.comparison import (
     slot_bits,
     slots_per_ciphertext,
 )
-
-from ..conftest import Keys
+from tests.conftest import Keys
 
 L, KAPPA = 16, 40
 Z_CRIT = 4.5  # one-sided normal quantile, about 3e-6

@@ -9,8 +9,8 @@ mission start), and telemetry recorded as a trajectory in simulated time.  Modul
 mission protocol), ``vehicle`` (the px4 process).
 """
 
-from .build import MissionRefused, Px4Build, Px4Error, find_build, free_instance
-from .vehicle import HEADLESS_PARAMS, HOME, Px4Vehicle
+from companion.sim.px4.build import MissionRefused, Px4Build, Px4Error, find_build, free_instance
+from companion.sim.px4.vehicle import HEADLESS_PARAMS, HOME, Px4Vehicle
 
 __all__ = [
     "HEADLESS_PARAMS",

@@ -15,8 +15,8 @@ from typing import Any, cast
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from ..mock_links import parse_datagram
-from .build import Px4Error
+from companion.sim.mock_links import parse_datagram
+from companion.sim.px4.build import Px4Error
 
 # PX4 custom_mode in HEARTBEAT: main mode in bits 16-23, sub mode in 24-31
 PX4_MODE_AUTO, PX4_AUTO_LOITER, PX4_AUTO_MISSION = 4, 3, 4

@@ -11,10 +11,10 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from ...mission import MissionItem
-from ..mock_missions import item_from, item_message
-from .build import MissionRefused
-from .link import Px4Link
+from companion.mission.items import MissionItem
+from companion.sim.mock_missions import item_from, item_message
+from companion.sim.px4.build import MissionRefused
+from companion.sim.px4.link import Px4Link
 
 ACCEPTED = mavlink.MAV_MISSION_ACCEPTED
 

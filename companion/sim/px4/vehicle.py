@@ -3,7 +3,7 @@
 :class:`Px4Vehicle` runs one instance of a build (:mod:`.build`) in lock-step at a chosen
 speed factor, from a fresh working directory, with the parameters a vehicle needs to fly
 without RC or a ground station, and talks to it as a ground station would (:mod:`.link`,
-:mod:`.missions`).  The product side (:mod:`companion.autopilot`) talks to the same vehicle
+:mod:`.missions`).  The product side (:mod:`companion.mission.autopilot`) talks to the same vehicle
 over the onboard link at :attr:`Px4Vehicle.api_url`.
 """
 
@@ -22,9 +22,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from ...tasks import spawn
-from . import build as instances
-from .build import (
+import companion.sim.px4.build as instances
+from companion.sim.px4.build import (
     ALREADY_RUNNING,
     COMPANION_PORT,
     GCS_PORT,
@@ -35,8 +34,9 @@ from .build import (
     find_build,
     free_instance,
 )
-from .link import GcsLink, result_name
-from .missions import Px4Missions
+from companion.sim.px4.link import GcsLink, result_name
+from companion.sim.px4.missions import Px4Missions
+from companion.tasks import spawn
 
 HOME = (47.3990, 8.5420, 488.0)  # lat, lon (degrees), altitude AMSL (m)
 READY_LINE = "Ready for takeoff!"

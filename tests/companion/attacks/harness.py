@@ -11,24 +11,25 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from companion.app.runtime import Companion, CompanionSettings, Credentials
 from companion.auth.beacon_keys import BeaconKeys
 from companion.auth.session import Initiator, Route
 from companion.auth.trust import UnknownPeers
-from companion.beacon import Beacon, CertBeacon
-from companion.beacon import keys_hash as beacon_keys_hash
-from companion.exchange import RunReport, run_alice
-from companion.flightpath import flight_path
-from companion.levels import Slots
-from companion.link import PROFILES, Channel, Clock, Impairments, LinkEndpoint, SimMedium
-from companion.link.frames import OVERHEAD, AbortCode, Flag, Frame, FrameType, decode_frame
-from companion.mission import MissionItem
-from companion.missionfile import read_plan
-from companion.runtime import Companion, CompanionSettings, Credentials
+from companion.mission.files import read_plan
+from companion.mission.flightpath import flight_path
+from companion.mission.items import MissionItem
+from companion.mission.levels import Slots
+from companion.neighbours.beacon import Beacon, CertBeacon
+from companion.neighbours.beacon import keys_hash as beacon_keys_hash
+from companion.radio import PROFILES, Clock, LinkEndpoint
+from companion.radio.frames import OVERHEAD, AbortCode, Flag, Frame, FrameType, decode_frame
+from companion.runs.exchange import RunReport, run_alice
 from companion.sim.fleet import make_fleet
-from protocol.geometry import Point
-from protocol.grid import GridSpec
+from companion.sim.medium import Channel, Impairments, SimMedium
+from protocol.geo.geometry import Point
+from protocol.geo.grid import GridSpec
 from protocol.intersection import Alice, Bob
-from protocol.wire import Suite
+from protocol.messages import Suite
 
 SCENARIOS = Path(__file__).resolve().parents[3] / "sitl_configs" / "scenarios"
 PROFILE = PROFILES["us915-sf7"]
@@ -279,7 +280,7 @@ def aborts_are_codes(w: World) -> None:
 def count_bobs(monkeypatch: Any) -> list[Any]:
     """Every Bob machine a companion builds from now on (a request refused before any work
     builds none)."""
-    import companion.bob_answers
+    import companion.runs.bob
 
     built: list[Any] = []
     real_bob = Bob
@@ -288,5 +289,5 @@ def count_bobs(monkeypatch: Any) -> list[Any]:
         built.append(args)
         return real_bob(*args, **kwargs)
 
-    monkeypatch.setattr(companion.bob_answers, "Bob", counting_bob)
+    monkeypatch.setattr(companion.runs.bob, "Bob", counting_bob)
     return built

@@ -9,14 +9,13 @@ from typing import Any
 
 import pytest
 
+from companion.app.core import CompanionSettings
 from companion.auth.session import Refusal
-from companion.core import CompanionSettings
-from companion.exchange import PeerRefused
-from companion.link import run_simulated
-from protocol.grid import GridSpec
-from protocol.wire import Suite
-
-from .harness import World, count_bobs, world
+from companion.runs.exchange import PeerRefused
+from companion.sim.virtual_time import run_simulated
+from protocol.geo.grid import GridSpec
+from protocol.messages import Suite
+from tests.companion.attacks.harness import World, count_bobs, world
 
 pytestmark = [pytest.mark.attack, pytest.mark.deviating]
 
@@ -213,7 +212,7 @@ def test_a_bob_whose_ot_extension_fails_the_check_loses_the_setup(
     probe of drone 1's Delta.  Drone 1's consistency check refuses each such run before any
     key is made, reports no result and keeps no setup, so no guess is ever tried twice on
     one Delta; once drone 2 behaves, a fresh setup gives the answer."""
-    import protocol.suite_compact as compact
+    import protocol.compact.suite as compact
     from protocol.ot.extension import chooser_extend
     from protocol.ot.setup import HolderSetupStart
 

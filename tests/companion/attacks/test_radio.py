@@ -12,12 +12,11 @@ from typing import Any
 import pytest
 
 from companion.auth.session import Refusal
-from companion.link import run_simulated
-from companion.link.frames import AbortCode, Frame, FrameType
-from protocol.compact_plan import message_sizes
-from protocol.grid import GridSpec
-
-from .harness import Tap, World, aborts_are_codes, count_bobs, world
+from companion.radio.frames import AbortCode, Frame, FrameType
+from companion.sim.virtual_time import run_simulated
+from protocol.compact.plan import message_sizes
+from protocol.geo.grid import GridSpec
+from tests.companion.attacks.harness import Tap, World, aborts_are_codes, count_bobs, world
 
 pytestmark = pytest.mark.attack
 
@@ -158,7 +157,7 @@ def test_a_recorded_run_request_is_refused_by_a_fresh_bob(
 
 async def restart(w: World, node: int) -> Any:
     """A new companion for ``node`` on the same credentials and state directory."""
-    from companion.runtime import Companion, CompanionSettings
+    from companion.app.runtime import Companion, CompanionSettings
 
     old = w.drones[node]
     w.taps[node] = Tap(w.medium.attach(node), w.sniffer, w.clock)
@@ -244,7 +243,7 @@ def test_a_request_beyond_a_fair_run_is_refused_before_any_work(
     CPU and 1.3 GB, and its 1.3 MB first reply could not cross the link.  Bob now bounds the
     work of one run (m x his size x grid bits, budget.MAX_RUN_WORK) and refuses it (signed,
     SIZE) before he builds anything; the same path cut to the bound is answered."""
-    from companion.budget import MAX_RUN_WORK, run_work
+    from companion.runs.budget import MAX_RUN_WORK, run_work
 
     built = count_bobs(monkeypatch)
 
@@ -400,7 +399,7 @@ def test_a_forged_acknowledgement_does_not_cost_alice_her_answer(tmp_path: Path)
     for it in vain.  Now drone 1, hearing nothing for 120 s while drone 2's beacons come,
     sends its last message again, and drone 2, which keeps the finished run's session open
     for a while, answers that copy with its last message: the one run gives its result."""
-    from companion.link.frames import AckInfo, Flag
+    from companion.radio.frames import AckInfo, Flag
 
     async def main() -> tuple[World, int, list[Frame]]:
         w = await world(tmp_path)

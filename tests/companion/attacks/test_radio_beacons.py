@@ -13,13 +13,12 @@ import pytest
 from companion.auth.certificate import Certificate
 from companion.auth.session import Initiator, Route
 from companion.auth.trust import UnknownPeers
-from companion.beacon import CertBeacon, decode_beacon
-from companion.link import run_simulated
-from companion.link.frames import BROADCAST, Frame, FrameType
-from protocol.grid import GridSpec
+from companion.neighbours.beacon import CertBeacon, decode_beacon
+from companion.radio.frames import BROADCAST, Frame, FrameType
+from companion.sim.virtual_time import run_simulated
+from protocol.geo.grid import GridSpec
 from protocol.intersection import Alice
-
-from .harness import World, aborts_are_codes, world
+from tests.companion.attacks.harness import World, aborts_are_codes, world
 
 pytestmark = pytest.mark.attack
 
@@ -174,7 +173,7 @@ def test_paper_suite_keys_must_match_the_beacons(tmp_path: Path) -> None:
     signed beacons announce, the run gives a result; when his reply carries other keys than
     his beacons announced (here: the hash they announce made up), drone 1 refuses the run as
     unauthenticated and reports nothing."""
-    from protocol.wire import Suite
+    from protocol.messages import Suite
 
     async def main(forge_keys: bool) -> World:
         w = await world(

@@ -16,10 +16,9 @@ from companion.auth.keys import (
     SigningKey,
     read_private_key,
     read_public_key,
-    write_private_key,
-    write_public_key,
 )
 from companion.auth.trust import Operator, TrustStore, Untrusted, UntrustedPeer
+from companion.cli.keys import write_private_key, write_public_key
 
 NOW = int(time.time())
 

@@ -1,4 +1,4 @@
-"""companion.autopilot (MAVSDK, onboard link) against real PX4 v1.16 SITL vehicles (SIH).
+"""companion.mission.autopilot (MAVSDK, onboard link) against real PX4 v1.16 SITL vehicles (SIH).
 
 The harness (:mod:`companion.sim.px4`, the GCS link) puts missions on the vehicle, flies it
 and reads what it holds independently of the product.  PX4 reads items back as it stores
@@ -16,10 +16,10 @@ from contextlib import asynccontextmanager
 
 import pytest
 
-from companion.autopilot import Autopilot, AutopilotError
-from companion.mission import FRAMES_RELATIVE, MissionError, MissionItem
+from companion.mission.autopilot import Autopilot, AutopilotError
+from companion.mission.items import FRAMES_RELATIVE, MissionError, MissionItem
 from companion.sim.px4 import HOME, MissionRefused, Px4Build, Px4Vehicle
-from protocol.geodesy import ground_offset, moved
+from protocol.geo.geodesy import ground_offset, moved
 
 pytestmark = [
     pytest.mark.asyncio,

@@ -10,13 +10,12 @@ from typing import Any, Protocol
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.flight_model import Kinematics
-from companion.mission import MissionItem
+from companion.mission.flight_model import Kinematics
+from companion.mission.items import MissionItem
 from companion.sim.mock_autopilot import FlightModel, MockAutopilot, item_message
 from companion.sim.mock_missions import item_from
 from companion.sim.replay import free_udp_port as free_port
-
-from ..missions import HOME, item
+from tests.companion.missions import HOME, item
 
 FROZEN = FlightModel(time_scale=0.0)  # simulated time stands still: nothing moves by itself
 # a vehicle that gets anywhere at once (tests of the mission protocol, not of the kinematics)

@@ -10,12 +10,11 @@ import math
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.autopilots import PX4
+from companion.mission.personalities import PX4
 from companion.sim.mock_autopilot import FlightModel, MockAutopilot, item_message
 from companion.sim.replay import free_udp_port as free_port
-
-from ..missions import item
-from .station import LAT, LON, Station, f32, home_item, legs, mock_and_station
+from tests.companion.missions import item
+from tests.companion.sim.station import LAT, LON, Station, f32, home_item, legs, mock_and_station
 
 pytestmark = pytest.mark.asyncio
 

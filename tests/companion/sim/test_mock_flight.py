@@ -8,14 +8,13 @@ from __future__ import annotations
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.autopilot import Autopilot
-from companion.flightpath import DO_JUMP, flight_order
-from companion.mission import MissionItem
+from companion.mission.autopilot import Autopilot
+from companion.mission.flightpath import DO_JUMP, flight_order
+from companion.mission.items import MissionItem
 from companion.sim.mock_autopilot import MockAutopilot
 from companion.sim.replay import free_udp_port as free_port
-
-from ..missions import item
-from .station import FAST, FROZEN, LAT, LON, home_item, legs, mock_and_station
+from tests.companion.missions import item
+from tests.companion.sim.station import FAST, FROZEN, LAT, LON, home_item, legs, mock_and_station
 
 pytestmark = pytest.mark.asyncio
 

@@ -9,14 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from companion.link import PROFILES
+from companion.radio import PROFILES
 from companion.sim.bench_link import bench_link, format_link
 from companion.sim.over_link import link_case
+from protocol.messages import Suite
 from protocol.tools.compare import Party
 from protocol.tools.paper_data import load_paper_data
-from protocol.wire import Suite
-
-from ...paper_shaped import PaperShaped
+from tests.paper_shaped import PaperShaped
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
@@ -132,23 +131,25 @@ def test_authentication_adds_the_key_exchange_and_a_tag_per_message(
 def test_compare_mission_files_as_they_are_flown(tmp_path: Path) -> None:
     """Two mission files are compared on their flown paths: Bob's line crosses only Alice's
     launch leg (home -> first waypoint) and her RTL leg, which a positions-only reader misses."""
-    from companion.missionfile import write_wpl
-
-    from ..missions import item
+    from companion.mission.files import format_wpl
+    from protocol.tools.cli import write_atomic
+    from tests.companion.missions import item
 
     home = (47.3970, 8.5450, 488.0)
     alice = [item(0, 16, 47.3990, 8.5450, 30.0), item(1, 16, 47.3990, 8.5480), item(2, 20, frame=2)]
     bob = [item(0, 16, 47.3980, 8.5430, 40.0), item(1, 16, 47.3980, 8.5440, 40.0)]
     a, b = tmp_path / "alice.waypoints", tmp_path / "bob.waypoints"
-    write_wpl(a, alice, home)
-    write_wpl(b, bob, (47.3980, 8.5420, 488.0))  # Bob: home west, east to 8.5440 ...
+    write_atomic(a, format_wpl(alice, home))
+    write_atomic(b, format_wpl(bob, (47.3980, 8.5420, 488.0)))  # Bob: home west, east to 8.5440 ...
     result = run_cli("compare", str(a), str(b), "--link", "ideal", "--json")
     assert result.returncode == 0, result.stderr
     (case,) = json.loads(result.stdout)["cases"]
     # Alice flies home -> wp0 (north), wp0 -> wp1 (east), wp1 -> home (RTL): Bob's line
     # (lat 47.3980 from 8.5420 to 8.5440) stays west of her launch leg at 8.5450
     assert case["hits"] == case["plain_hits"] == [False, False, False]
-    write_wpl(b, [*bob, item(2, 16, 47.3980, 8.5490, 40.0)], (47.3980, 8.5420, 488.0))
+    write_atomic(
+        b, format_wpl([*bob, item(2, 16, 47.3980, 8.5490, 40.0)], (47.3980, 8.5420, 488.0))
+    )
     result = run_cli("compare", str(a), str(b), "--link", "ideal", "--json")
     (case,) = json.loads(result.stdout)["cases"]
     assert case["hits"] == case["plain_hits"] == [True, False, True]  # launch and RTL legs

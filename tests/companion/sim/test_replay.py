@@ -20,12 +20,11 @@ from xml.etree import ElementTree
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.failsafe import Action
+from companion.runs.failsafe import Action
 from companion.sim.mock_autopilot import Faults
 from companion.sim.replay import run_replay
 from companion.sim.scenario import ScenarioError, load_scenario
-
-from .replay_checks import (
+from tests.companion.sim.replay_checks import (
     SCENARIOS,
     Report,
     check,

@@ -16,8 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from companion.sim.mock_autopilot import Faults
 from companion.sim.replay import run_virtual
 from companion.sim.scenario import ScenarioError
-
-from .replay_checks import (
+from tests.companion.sim.replay_checks import (
     SCENARIOS,
     Report,
     check,

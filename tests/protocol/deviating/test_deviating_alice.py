@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from protocol.comparison import BlindedTests, ComparisonAlice, ComparisonBob, pack_differences
+from protocol.paper.comparison import BlindedTests, ComparisonAlice, ComparisonBob, pack_differences
 
 pytestmark = pytest.mark.deviating
 

@@ -13,16 +13,16 @@ from typing import Any
 import gmpy2
 import pytest
 
-from protocol import keyproof
-from protocol.dgk import DGKPublicKey
-from protocol.encoding import int_to_fixed
 from protocol.errors import RemoteProtocolError, UntrustedKeysError
-from protocol.intersection import Alice, Bob, State
-from protocol.paillier import PaillierPublicKey
-from protocol.primes import has_small_factor, random_prime
-from protocol.wire import Suite
-
-from ..paths import GRID
+from protocol.intersection import Alice, Bob
+from protocol.messages import Suite
+from protocol.paper import keyproof
+from protocol.primitives.dgk import DGKPublicKey
+from protocol.primitives.paillier import PaillierPublicKey
+from protocol.primitives.primes import has_small_factor, random_prime
+from protocol.run import State
+from protocol.wire.encoding import int_to_fixed
+from tests.protocol.paths import GRID
 
 pytestmark = pytest.mark.deviating
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from protocol import secp256k1 as ec
 from protocol.errors import LocalProtocolError, RemoteProtocolError
 from protocol.ot.base import BaseReceiver, BaseSender, message_size
+from protocol.primitives import secp256k1 as ec
 
 
 def test_receiver_gets_the_chosen_key_only() -> None:

@@ -1,0 +1,269 @@
+"""Settings of ``python -m companion run``: a TOML file, every key also a command-line flag.
+
+::
+
+    node = 1
+    autopilot = "udpin://0.0.0.0:14540"   # MAVSDK URL; PX4 SITL instance i: 14540 + i
+    ardupilot = false
+    suite = "compact"                     # or "paper" (Paillier + DGK, the paper's design)
+    ot_security = 112                     # compact suite, as Alice: 112 or 128-bit OT (Delta)
+    log_level = "info"
+    [link]
+    transport = "udp"                     # "udp" (a link hub) or "serial" (a LoRa modem)
+    profile = "us915-sf7"
+    hub = "127.0.0.1:14600"
+    serial = "/dev/ttyUSB0"
+    baudrate = 115200
+    [offset]
+    offset_m = 10.0
+    direction = "up"
+    max_altitude_m = 120.0
+    [identity]                            # python -m companion keys init|certify
+    key = "drone1.key"                    # this drone's signing key (paths: from this file)
+    certificate = "drone1.cert"           # its operator's certificate (names this node)
+    state_dir = "state1"                  # run budget, replay cache, beacon counters
+    [trust]
+    unknown_peers = "ignore"              # untrusted drones: "ignore" (logged once) or "alert"
+    [[trust.operator]]                    # one per operator whose drones we deconflict with
+    name = "acme"
+    key = "acme.pub"                      # a PEM public key file, or 64 hex digits
+    max_segments = 256                    # largest padded path of a run with its drones
+    max_runs_per_hour = 24                # runs its drones together may ask of us
+    max_answer_bits_per_hour = 1024       # answer bits its drones together may get of us
+    paper_keys = false                    # suite "paper": we accept its drones' unproven keys
+    [limits]
+    max_runs_per_peer = 8                 # runs one certified drone may ask of us per hour
+    max_runs_total = 64                   # runs all drones together may ask of us per hour
+    max_answer_bits_per_peer = 256        # answer bits (segments of its runs) per drone per hour
+    max_clock_skew_s = 30.0               # beacons and requests further off: refused
+    run_timeout_s = 900.0
+    beacon_interval_s = 10.0
+    initiation_range_m = 5000.0
+    lookahead_s = 60.0                    # compare at least the next 60 s of flight first
+    grid_radius_m = 500.0                 # smallest comparison box (doubled to hold the path)
+    max_box_radius_m = 64000.0            # largest box a peer's run may ask of us
+    max_peer_range_m = 30000.0            # farthest a peer's box centre may be from us
+    min_grid_resolution_mm = 100          # finest grid a peer's run may ask of us
+    [failsafe]
+    action = "climb"                      # "climb", "hold" or "off"
+    margin_s = 10.0
+    [separation]                          # what a conflict is (a run uses both drones' larger)
+    horizontal_m = 15.0                   # segments closer than this, horizontally
+    vertical_m = 10.0                     # altitude bands closer than this
+    altitude_error_m = 1.0                # our own altitude uncertainty, either way
+    late_s = 15.0                         # our own timing uncertainty: this much later
+    early_s = 10.0                        # or this much earlier than predicted,
+    time_tolerance_rate = 0.15            # plus this share of the time ahead either way
+    # ground_wait_s = 600                 # on the ground: take-off within this long (then
+                                          # compare again); absent: not known, windows open
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from companion.app.runtime import CompanionSettings, Credentials
+from companion.app.tables import Table, TableError, load_toml
+from companion.auth.certificate import Certificate, CertificateError
+from companion.auth.keys import KeyFileError, PublicKey, read_private_key, read_public_key
+from companion.auth.session import Identity
+from companion.auth.trust import Operator, TrustStore, UnknownPeers
+from companion.mission.autopilot import check_url
+from companion.mission.planner import OffsetSettings
+from companion.mission.schedule import SeparationSettings, Tolerance
+from companion.radio.airtime import PROFILES
+from companion.runs.failsafe import Action, FailsafeSettings
+from protocol.messages import Suite
+from protocol.ot.setup import DEFAULT_SECURITY, SECURITY_LEVELS
+from protocol.run import MAX_SEGMENTS
+
+PROFILE_NAMES = tuple(PROFILES)
+DEFAULT_AUTOPILOT = "udpin://0.0.0.0:14540"  # PX4 SITL instance 0's API link
+
+
+class ConfigError(TableError):
+    """The configuration is invalid; says which file and key."""
+
+
+@dataclass(frozen=True)
+class LinkSettings:
+    transport: str = "udp"
+    profile: str = "us915-sf7"
+    hub: tuple[str, int] = ("127.0.0.1", 14600)
+    serial: str = "/dev/ttyUSB0"
+    baudrate: int = 115200
+
+
+@dataclass(frozen=True)
+class Config:
+    companion: CompanionSettings
+    link: LinkSettings
+    credentials: Credentials | None  # None: no [identity] given (the companion needs one)
+    log_level: str = "info"
+
+
+def _path(base: Path, value: str) -> Path:
+    path = Path(value).expanduser()
+    return path if path.is_absolute() else base / path
+
+
+def _credentials(doc: Table, base: Path, node: int) -> Credentials | None:
+    """[identity] and [trust]: our key and certificate, the operators we trust."""
+    if not doc.has("identity"):
+        doc.known.add("trust")  # read with an identity only (the companion refuses without)
+        return None
+    identity = doc.table("identity")
+    try:
+        key = read_private_key(_path(base, identity.text("key")))
+    except KeyFileError as exc:
+        raise identity.fail(str(exc), "key") from None
+    cert_file = _path(base, identity.text("certificate"))
+    try:
+        cert = Certificate.decode(cert_file.read_bytes())
+    except OSError as exc:
+        raise identity.fail(f"{cert_file}: {exc.strerror}", "certificate") from None
+    except CertificateError as exc:
+        raise identity.fail(f"{cert_file}: {exc}", "certificate") from None
+    if cert.drone != key.public:
+        raise identity.fail(f"{cert_file} certifies another key than identity.key")
+    if cert.node != node:
+        raise identity.fail(f"{cert_file} is for node {cert.node}, not node {node}")
+    state = _path(base, identity.text("state_dir", "state"))
+    trust = doc.table("trust")
+    policy = trust.text("unknown_peers", "ignore", [p.value for p in UnknownPeers])
+    operators = []
+    entries = trust.tables("operator", "[[trust.operator]]")
+    if not entries:
+        raise trust.fail("at least one [[trust.operator]] (name, key) is needed")
+    for k, entry in enumerate(entries):
+        name = entry.text("name", f"operator{k}")
+        text = entry.text("key")
+        max_segments = entry.integer("max_segments", 256, low=1, high=MAX_SEGMENTS)
+        runs = entry.integer("max_runs_per_hour", 24, low=1)
+        bits = entry.integer("max_answer_bits_per_hour", 1024, low=1)
+        paper_keys = entry.flag("paper_keys", False)
+        try:
+            public = (
+                PublicKey.parse(text)
+                if len(text.strip()) == 64 and not Path(text).suffix
+                else read_public_key(_path(base, text))
+            )
+            operators.append(
+                Operator(
+                    name,
+                    public,
+                    max_segments=max_segments,
+                    max_runs_per_hour=runs,
+                    max_answer_bits_per_hour=bits,
+                    paper_keys=paper_keys,
+                )
+            )
+        except (KeyFileError, ValueError) as exc:
+            raise entry.fail(f"({name}) {exc}") from None
+    return Credentials(Identity(key, cert), TrustStore(operators, UnknownPeers(policy)), state)
+
+
+def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
+    """Read the TOML file (optional) and apply ``overrides`` (dotted keys, from flags); every
+    key is checked (:mod:`companion.app.tables`), unknown ones included."""
+    raw: dict[str, Any] = {}
+    base = Path(path).parent if path is not None else Path.cwd()
+    if path is not None:
+        raw = load_toml(path, ConfigError)
+    for dotted, value in (overrides or {}).items():
+        if value is None:
+            continue
+        table = raw
+        *parents, key = dotted.split(".")
+        for parent in parents:
+            table = table.setdefault(parent, {})
+        table[key] = value
+    doc = Table(raw, str(path) if path is not None else "settings", ConfigError)
+    link = doc.table("link")
+    offset = doc.table("offset")
+    limits = doc.table("limits")
+    failsafe = doc.table("failsafe")
+    separation = doc.table("separation")
+    node = doc.optional_integer("node", low=1, high=0xFFFE)
+    transport = link.text("transport", "udp", ("udp", "serial"))
+    profile_name = link.text("profile", "us915-sf7", PROFILE_NAMES)
+    host, _, port = link.text("hub", "127.0.0.1:14600").rpartition(":")
+    if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise link.fail("expected HOST:PORT with a port 1..65535", "hub")
+    level = doc.text("log_level", "info", ("debug", "info", "warning", "error"))
+    offset_m = offset.number("offset_m", 10.0, low=0.0, above=True)
+    direction = offset.text("direction", "up", ("up", "down"))
+    max_altitude_m = offset.number("max_altitude_m", 120.0, low=0.0, above=True)
+    try:
+        offset_settings = OffsetSettings(
+            offset_m=offset_m, direction=direction, max_altitude_m=max_altitude_m
+        )
+    except ValueError as exc:
+        raise offset.fail(str(exc)) from None
+    suites = {s.label: s for s in Suite}
+    suite = doc.text("suite", "compact", list(suites))
+    ot_security = doc.integer("ot_security", DEFAULT_SECURITY)
+    if ot_security not in SECURITY_LEVELS:
+        raise doc.fail(f"one of {', '.join(map(str, SECURITY_LEVELS))}", "ot_security")
+    action = failsafe.text("action", "climb", [a.value for a in Action])
+
+    def positive(table: Table, key: str, default: float, zero: bool = False) -> float:
+        return table.number(key, default, low=0.0, above=not zero)
+
+    autopilot_url = doc.text("autopilot", DEFAULT_AUTOPILOT)
+    try:
+        check_url(autopilot_url)  # before the link or MAVSDK starts
+    except ValueError as exc:
+        raise doc.fail(str(exc), "autopilot") from None
+    companion = functools.partial(
+        CompanionSettings,
+        autopilot_url=autopilot_url,
+        ardupilot=doc.flag("ardupilot", False),
+        suite=suites[suite],
+        ot_security=ot_security,
+        offset=offset_settings,
+        beacon_interval_s=positive(limits, "beacon_interval_s", 10.0),
+        initiation_range_m=positive(limits, "initiation_range_m", 5000.0),
+        grid_radius_m=positive(limits, "grid_radius_m", 500.0),
+        max_box_radius_m=positive(limits, "max_box_radius_m", 64000.0),
+        max_peer_range_m=positive(limits, "max_peer_range_m", 30000.0),
+        min_grid_resolution_mm=limits.integer("min_grid_resolution_mm", 100, low=1),
+        max_runs_per_peer=limits.integer("max_runs_per_peer", 8, low=1),
+        max_runs_total=limits.integer("max_runs_total", 64, low=1),
+        max_answer_bits_per_peer=limits.integer("max_answer_bits_per_peer", 256, low=1),
+        max_clock_skew_s=positive(limits, "max_clock_skew_s", 30.0),
+        run_timeout_s=positive(limits, "run_timeout_s", 900.0),
+        lookahead_s=positive(limits, "lookahead_s", 60.0, zero=True),
+        failsafe=FailsafeSettings(Action(action), positive(failsafe, "margin_s", 10.0)),
+        separation=SeparationSettings(
+            positive(separation, "horizontal_m", 15.0, zero=True),
+            positive(separation, "vertical_m", 10.0, zero=True),
+            Tolerance(
+                positive(separation, "altitude_error_m", 1.0, zero=True),
+                positive(separation, "late_s", 15.0, zero=True),
+                positive(separation, "early_s", 10.0, zero=True),
+                positive(separation, "time_tolerance_rate", 0.15, zero=True),
+                positive(separation, "ground_wait_s", 1.0)
+                if "ground_wait_s" in separation.doc
+                else math.inf,
+            ),
+        ),
+    )
+    settings = LinkSettings(
+        transport,
+        profile_name,
+        (host, int(port)),
+        link.text("serial", "/dev/ttyUSB0"),
+        link.integer("baudrate", 115200, low=1),
+    )
+    if node is None:  # unknown keys first: a misspelt "nod" says so
+        doc.known |= {"identity", "trust"}
+        doc.finish()
+        raise doc.fail("a node id 1..65534 is required (node = N, or --node)", "node")
+    credentials = _credentials(doc, base, node)
+    doc.finish()
+    return Config(companion(node=node), settings, credentials, level)

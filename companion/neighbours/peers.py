@@ -1,0 +1,217 @@
+"""What a companion knows about each peer it hears (pure): beacons, speed, urgency, reach.
+
+Distances are on the local tangent plane (:func:`protocol.geo.geodesy.ground_offset`, WGS84); speeds
+come from successive beacons.  Urgency (:func:`time_to_meet`) comes from the rate at which
+the distance shrinks, beacon to beacon, or, without a fresh measurement, from the worst case:
+the two drones flying straight at each other, never below ``floor_m_s`` each.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from companion.neighbours.beacon import Beacon
+from companion.runs.roles import Role
+from protocol.geo.geodesy import ground_offset
+from protocol.run import MAX_SEGMENTS, Limits
+
+MAX_SPEED_M_S = 40.0  # no drone flies faster: beacon speeds are capped, boxes bounded by it
+TRACK_SLACK_M = 200.0  # position error a track allows on top of MAX_SPEED_M_S
+
+
+def distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
+    """Ground distance between two degE7 points."""
+    return math.hypot(*ground_offset(a[0] / 1e7, a[1] / 1e7, b[0] / 1e7, b[1] / 1e7))
+
+
+def segment_distance_m(p: tuple[int, int], a: tuple[int, int], b: tuple[int, int]) -> float:
+    """Ground distance from point p to segment ab (degE7), on the tangent plane at p."""
+    ay, ax = ground_offset(p[0] / 1e7, p[1] / 1e7, a[0] / 1e7, a[1] / 1e7)
+    by, bx = ground_offset(p[0] / 1e7, p[1] / 1e7, b[0] / 1e7, b[1] / 1e7)
+    dx, dy = bx - ax, by - ay
+    length2 = dx * dx + dy * dy
+    t = 0.0 if length2 == 0 else max(0.0, min(1.0, -(ax * dx + ay * dy) / length2))
+    return math.hypot(ax + t * dx, ay + t * dy)
+
+
+def path_length_m(path: Sequence[tuple[int, int]]) -> float:
+    return sum(distance_m(a, b) for a, b in itertools.pairwise(path))
+
+
+def cut_at(
+    path: Sequence[tuple[int, int]],
+    horizon_m: float,
+    position: tuple[int, int] | None = None,
+) -> list[tuple[int, int]]:
+    """The path up to the first vertex at least ``horizon_m`` ahead (whole segments, so
+    nothing is rounded); all of it for a horizon of 0.  Distances count from ``position``
+    (the drone, somewhere on the first segment) when given, else from the first vertex."""
+    if horizon_m <= 0 or len(path) < 2:
+        return list(path)
+    out = [path[0]]
+    for k, (a, b) in enumerate(itertools.pairwise(path)):
+        out.append(b)
+        horizon_m -= distance_m(position if position is not None and k == 0 else a, b)
+        if horizon_m <= 0:
+            break
+    return out
+
+
+def near_cut(
+    path: Sequence[tuple[int, int]],
+    horizon_m: float,
+    position: tuple[int, int] | None = None,
+    *,
+    least: int = 2,
+) -> list[tuple[int, int]]:
+    """What a near run compares: :func:`cut_at`, at least ``least`` segments, and then as
+    many more as the padding makes free (runs are padded to a power of two, so 3 segments
+    cost what 4 do).  A near run that takes them may leave no full run to do, which under a
+    duty cycle is the difference between a result and a precaution."""
+    if horizon_m <= 0 or len(path) < 2:
+        return list(path)
+    segments = max(len(cut_at(path, horizon_m, position)) - 1, least)
+    return list(path[: Limits().padded(min(segments, MAX_SEGMENTS)) + 1])
+
+
+@dataclass
+class Peer:
+    node: int
+    beacon: Beacon
+    heard_at: float
+    identity: bytes = b""  # the certified drone's fingerprint (companion.neighbours.registry)
+    speed_m_s: float = 0.0
+    role: Role | None = None  # once this pair has met: roles then stay
+    compared: tuple[int, int] | None = None  # (peer's, our) mission versions of the last run
+    next_try: float = 0.0
+    retry_in: float | None = None  # after a run without result: retry this soon (None: the
+    # settings' retry_after_s)
+    busy: bool = False  # it refused our last request BUSY: asked again soon
+    raised: bool = False  # its announced altitude slots once reached above its first ones
+    conflicts: set[int] = field(default_factory=set)  # our segments that meet its path
+    plan: list[tuple[str, int]] = field(default_factory=list)  # runs still to do (phase, horizon)
+    plan_version: tuple[int, int] | None = None  # the versions the plan was made for
+    covered: set[int] = field(default_factory=set)  # our segments a finished run compared
+    settled: set[int] = field(default_factory=set)  # ... for good: a full run compared
+    # them, or we leave them before the peer could come near (a near run left them out)
+    full_after: float = 0.0  # link time before which the full run waits
+    full_left: bool = False  # the last full run compared only the urgent part: more to do
+    near_run: tuple[float, int] | None = None  # the last near run: (started at, horizon m)
+    rate_from: tuple[float, tuple[int, int], float] | None = None  # (when, where, distance
+    # to us): the beacon speed and range rate are measured from
+    range_rate: float = 0.0  # m/s, positive while we fly apart
+    measured: bool = False  # range_rate comes from two beacons
+    made_at: float | None = None  # link time its beacon's position was taken (its stamp)
+    met_at: float = 0.0  # link time it became a peer
+    # (link time, position) of its last position that its track makes plausible: within
+    # TRACK_SLACK_M plus MAX_SPEED_M_S since the anchor before.  A run's box is checked
+    # against it (companion.runs.bob), not against a claim out of nowhere.
+    anchor: tuple[float, tuple[int, int]] | None = None
+
+    @property
+    def position(self) -> tuple[int, int]:
+        return self.beacon.lat, self.beacon.lon
+
+    def heard(
+        self,
+        beacon: Beacon,
+        now: float,
+        own: tuple[int, int],
+        *,
+        max_speed: float = MAX_SPEED_M_S,
+        made_at: float | None = None,
+    ) -> None:
+        """A new beacon: update the speed estimate (smoothed, capped: a take-off jump is not
+        a speed) and the rate at which the distance to us changes -- each over at least
+        ``RATE_SPAN_S``: two beacons a second apart (one sent at once after an edit) and a
+        position of ours a moment old would make a closing rate out of nothing -- and the
+        position.  ``made_at``: when the beacon's position was taken (its time stamp, in
+        link time), else when it was heard -- a beacon queued behind a run's burst is heard
+        many seconds late, and two positions 14 s apart heard 4 s apart are not 3.5 times
+        the speed."""
+        made = now if made_at is None else min(made_at, now)
+        gap = distance_m(own, (beacon.lat, beacon.lon))
+        if self.rate_from is None:  # our distance at its first beacon is not known
+            self.rate_from = (made, (beacon.lat, beacon.lon), gap)
+        then, where, before = self.rate_from
+        dt = made - then
+        if dt >= RATE_SPAN_S:
+            speed = min(distance_m(where, (beacon.lat, beacon.lon)) / dt, max_speed)
+            self.speed_m_s = speed if self.speed_m_s == 0 else 0.5 * (self.speed_m_s + speed)
+            self.range_rate = (gap - before) / dt
+            self.measured = True
+            self.rate_from = (made, (beacon.lat, beacon.lon), gap)
+        self.beacon, self.heard_at, self.made_at = beacon, now, made
+        here = (beacon.lat, beacon.lon)
+        if self.anchor is None or distance_m(self.anchor[1], here) <= self.reach_m(made):
+            self.anchor = (made, here)
+
+    def reach_m(self, now: float) -> float:
+        """How far from its anchor it may plausibly be at ``now`` (link time)."""
+        if self.anchor is None:
+            return 0.0
+        return TRACK_SLACK_M + MAX_SPEED_M_S * max(now - self.anchor[0], 0.0)
+
+    def position_age(self, now: float) -> float:
+        """Seconds since its position was taken."""
+        return max(now - (self.heard_at if self.made_at is None else self.made_at), 0.0)
+
+
+RATE_SPAN_S = 4.0  # speeds and range rates are measured over at least this long
+SEPARATING_M_S = 2.0  # a range rate above this: the two fly apart
+MIN_CLOSING_M_S = 2.0  # a measured closing rate is taken as at least this
+FRESH_S = 15.0  # a range rate older than this is not trusted
+
+
+def time_to_meet(
+    own: tuple[int, int],
+    own_speed: float,
+    peer: Peer,
+    *,
+    floor_m_s: float,
+    peer_floor_m_s: float | None = None,
+    now: float | None = None,
+    silent_after_s: float = 0.0,
+    measured: bool = True,
+) -> float:
+    """Seconds until the two drones could meet.  With a fresh measurement (two beacons, the
+    last one less than ``FRESH_S`` old; a turn shows within one interval) at the rate their
+    distance shrinks, at least ``MIN_CLOSING_M_S``; otherwise flying straight at each other,
+    each at least ``floor_m_s`` (the peer ``peer_floor_m_s`` if given); a peer not heard
+    for more than ``silent_after_s`` (longer than beacons are ever deferred) already that
+    much closer for every second since (a peer that fell silent is not parked where it
+    was).  Infinite while they clearly fly apart.  ``measured=False``: the worst case even
+    with a measurement (the earliest the peer *could* be here)."""
+    fresh = measured and peer.measured and (now is None or now - peer.heard_at <= FRESH_S)
+    if fresh and peer.range_rate > SEPARATING_M_S:
+        return math.inf
+    distance = distance_m(own, peer.position)
+    if fresh:
+        closing = max(-peer.range_rate, MIN_CLOSING_M_S)
+    else:
+        peer_speed = max(peer.speed_m_s, floor_m_s if peer_floor_m_s is None else peer_floor_m_s)
+        closing = max(own_speed, floor_m_s) + peer_speed
+        if now is not None and now - peer.heard_at > silent_after_s:
+            distance = max(distance - peer_speed * (now - peer.heard_at), 0.0)
+    return distance / closing
+
+
+def reached_within(
+    path: Sequence[tuple[int, int]],
+    first: int,
+    position: tuple[int, int] | None,
+    distance: float,
+) -> set[int]:
+    """Indices (``first`` + k) of the segments the drone starts within ``distance`` metres
+    along its path from ``position`` (the current segment counts at once)."""
+    out = {first}
+    travelled = 0.0
+    for k, (a, b) in enumerate(itertools.pairwise(path)):
+        travelled += distance_m(position if position is not None and k == 0 else a, b)
+        if travelled > distance or k + 1 >= len(path) - 1:
+            break
+        out.add(first + k + 1)
+    return out

@@ -1,0 +1,434 @@
+"""An asyncio link endpoint: reliable messages over one radio, within its regulation.
+
+Drives the pure pieces (``frames``, ``reassembly``, ``arq``, ``airtime``) with a transport and
+a clock.  One radio, so one transmit queue: control frames (ACK, POLL, ABORT) go before data,
+every frame waits for the duty-cycle budget (data leaves a reserve for control) and frames are
+spaced by the radio's turnaround time.  Messages travel in *sessions* (peer, 16-bit id); a
+session's messages are sent one at a time and arrive in order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import random
+import secrets
+from collections.abc import Callable, Coroutine
+from typing import Any
+
+from companion.radio.airtime import DutyCycle, LinkProfile
+from companion.radio.arq import (
+    LinkError,
+    LinkTimeout,
+    MessageTooLarge,
+    Outgoing,
+    PeerAborted,
+    RetransmissionTimer,
+)
+from companion.radio.beacon_frames import BeaconParts, beacon_frames
+from companion.radio.clock import Clock
+from companion.radio.config import LinkConfig, Session
+from companion.radio.frames import (
+    BROADCAST,
+    MAX_ACK_BITMAP,
+    OVERHEAD,
+    AbortCode,
+    Flag,
+    Frame,
+    FrameError,
+    FrameType,
+    abort_payload,
+    decode_frame,
+)
+from companion.radio.reassembly import Delivered, Receiver
+from companion.radio.stats import LinkStats
+from companion.radio.transmitter import Transmitter
+from companion.radio.transport import Transport
+from companion.tasks import spawn
+
+log = logging.getLogger("companion.radio")
+_JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
+
+
+class LinkEndpoint:
+    """Node ``node`` on a radio ``transport`` under ``profile``."""
+
+    def __init__(
+        self,
+        node: int,
+        transport: Transport,
+        profile: LinkProfile,
+        config: LinkConfig | None = None,
+        clock: Clock | None = None,
+    ) -> None:
+        if not 0 <= node < BROADCAST:
+            raise ValueError(f"node id {node} outside 0..{BROADCAST - 1}")
+        self.node = node
+        self.transport = transport
+        self.profile = profile
+        self.config = config or LinkConfig()
+        self.clock = clock or Clock()
+        self.frame_size = profile.max_frame
+        self.payload_size = self.frame_size - OVERHEAD
+        if self.payload_size < 16:
+            raise ValueError(f"profile {profile.name} leaves no room for payload")
+        self.idle_timeout = self.config.idle_timeout(profile)
+        self.stats = LinkStats()
+        self.receiver = Receiver(
+            node,
+            max_message=self.config.max_message,
+            max_partial=self.config.max_partial,
+            idle_timeout=self.idle_timeout,
+        )
+        self.duty = DutyCycle(profile.budget_s, profile.duty_window_s, self.config.control_reserve)
+        self.beacons: asyncio.Queue[tuple[int, bytes]] = asyncio.Queue(maxsize=64)
+        self.radio = Transmitter(transport, profile, self.duty, self.stats, self.clock)
+        self._sessions: dict[tuple[int, int], Session] = {}
+        self._closed: dict[tuple[int, int], float] = {}
+        self._aborted: dict[tuple[int, int], Frame] = {}
+        self._accept: asyncio.Queue[tuple[int, int] | LinkError] = asyncio.Queue()
+        self._outgoing: dict[tuple[int, int, int], tuple[Outgoing, asyncio.Event]] = {}
+        self._timers: dict[int, RetransmissionTimer] = {}
+        self._tasks: list[asyncio.Task[None]] = []
+        self._lingering: set[asyncio.Task[None]] = set()
+        self._last_traffic = -math.inf
+        self._beacon_seq = secrets.randbelow(256)
+        self._beacon_parts = BeaconParts(self.stats)
+
+    # ------------------------------------------------------------------ lifecycle
+
+    async def start(self) -> None:
+        self.radio.running = True
+        self.transport.set_receiver(self._on_bytes)
+        self._tasks = [
+            spawn(work, name=f"link-{what}-{self.node}", log=log, on_failure=self._failed)
+            for what, work in (("tx", self.radio.run()), ("gc", self._housekeeping()))
+        ]
+
+    def _failed(self, exc: BaseException) -> None:
+        """A link task died (logged by :func:`~companion.tasks.spawn`): the radio is gone, so
+        every send, receive and accept fails now with a LinkError instead of hanging."""
+        error = LinkError(f"node {self.node}: the link failed: {exc!r}")
+        self.radio.stop(error)
+        for _, acked in self._outgoing.values():
+            acked.set()  # its sender wakes, sees the error
+        for sess in self._sessions.values():
+            sess.inbox.put_nowait(error)
+        self._accept.put_nowait(error)
+
+    async def close(self) -> None:
+        self.radio.running = False
+        tasks = [*self._tasks, *self._lingering]
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)  # a dead one was logged
+        self.radio.fail_pending(LinkError("link endpoint closed"))
+        await self.transport.close()
+
+    async def __aenter__(self) -> LinkEndpoint:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    # ------------------------------------------------------------------ sessions
+
+    def open(self, peer: int, session: int | None = None) -> int:
+        """Start a session with ``peer``; returns its id (random unless given)."""
+        while session is None or (peer, session) in self._sessions:
+            session = secrets.randbelow(0xFFFF) + 1
+        self._closed.pop((peer, session), None)
+        self._aborted.pop((peer, session), None)
+        self._sessions[(peer, session)] = Session(peer, session, self.clock.now())
+        self.receiver.trust(peer, session)  # ours: its replies are kept before anybody's
+        return session
+
+    async def accept(self, timeout: float | None = None) -> tuple[int, int]:
+        """Wait for a peer to start a session; its first message is ready to ``receive``."""
+        async with self.clock.timeout(timeout):
+            item = await self._accept.get()
+        if isinstance(item, LinkError):
+            self._accept.put_nowait(item)  # for every other waiter too
+            raise item
+        return item
+
+    def arrived(self, peer: int, session: int) -> float:
+        """When (Unix seconds, :meth:`Clock.wall`) the first fragment of a session the peer
+        opened reached us: what a request's own time is checked against (its transfer may
+        take long)."""
+        return self.clock.wall() - (self.clock.now() - self._session(peer, session).arrived)
+
+    def close_session(self, peer: int, session: int) -> None:
+        """Forget a session: its buffers are freed, late frames are ignored."""
+        self._sessions.pop((peer, session), None)
+        self._closed[(peer, session)] = self.clock.now()
+        self.receiver.forget_session(peer, session)
+        self.receiver.untrust(peer, session)
+
+    def secure(self, peer: int, session: int, check: Callable[[int, bytes], bool]) -> None:
+        """The session is authenticated above the link: from now on an ABORT ends it only
+        with a proof ``check(code, proof)`` accepts -- one without is anybody's, ignored
+        (``unproven_abort``) -- and its partial messages are kept before anybody's."""
+        self._session(peer, session).abort_check = check
+        self.receiver.trust(peer, session)
+
+    def abort(self, peer: int, session: int, code: AbortCode, proof: bytes = b"") -> None:
+        """Tell the peer the session is over (three copies, and again whenever it asks for an
+        ACK in this session) and close it here; ``proof``: that it is us (keyed sessions)."""
+        frame = Frame(FrameType.ABORT, self.node, peer, session, payload=abort_payload(code, proof))
+        for _ in range(3 if self.radio.running else 0):
+            self._enqueue(frame, control=True)
+        self.close_session(peer, session)
+        self._aborted[(peer, session)] = frame  # repeated to whoever still asks (like a RST)
+
+    def linger(self, peer: int, session: int, work: Coroutine[Any, Any, None]) -> None:
+        """Let ``work`` keep the open session (it closes it) beside whatever comes next: a
+        finished run that may still be asked for its last message.  A lingering session
+        does not make the radio :meth:`busy`; it ends with the endpoint."""
+        self._session(peer, session).lingering = True
+        task = spawn(work, name=f"link-linger-{self.node}-{peer}-{session}", log=log)
+        self._lingering.add(task)
+        task.add_done_callback(self._lingering.discard)
+
+    def has_message(self, peer: int, session: int) -> bool:
+        """A message of the session waits to be received."""
+        sess = self._sessions.get((peer, session))
+        return sess is not None and not sess.inbox.empty()
+
+    def busy(self, quiet_s: float = 2.0) -> bool:
+        """A session is open, a message half received, or session traffic was heard in the
+        last ``quiet_s`` seconds: a beacon now would likely collide with somebody's run."""
+        return bool(
+            any(not sess.lingering for sess in self._sessions.values())
+            or self.receiver.pending()
+            or self.clock.now() - self._last_traffic < quiet_s
+        )
+
+    def budget_wait(self) -> float:
+        """Seconds the next queued frame must still wait for the duty-cycle budget (0: none
+        waits, or nothing is queued)."""
+        return self.radio.budget_wait()
+
+    def _session(self, peer: int, session: int) -> Session:
+        try:
+            return self._sessions[(peer, session)]
+        except KeyError:
+            raise LinkError(f"no open session {session} with node {peer}") from None
+
+    # ------------------------------------------------------------------ messages
+
+    async def send(self, peer: int, session: int, data: bytes) -> None:
+        """Deliver ``data`` reliably to ``peer`` (returns once it acknowledged all of it)."""
+        sess = self._session(peer, session)
+        if len(data) > self.config.max_message:
+            raise MessageTooLarge(f"{len(data)} bytes > max_message {self.config.max_message}")
+        async with sess.send_lock:
+            seq, sess.next_seq = sess.next_seq, (sess.next_seq + 1) & 0xFF
+            out = Outgoing(
+                self.node,
+                peer,
+                session,
+                seq,
+                data,
+                self.payload_size,
+                window=self.config.window,
+                max_tries=self.config.max_tries,
+                max_polls=self.config.max_polls,
+            )
+            acked = asyncio.Event()
+            self._outgoing[(peer, session, seq)] = (out, acked)
+            try:
+                while not out.complete:
+                    self._raise_if_aborted(sess)
+                    acked.clear()
+                    frames = out.burst()
+                    fresh = out.tries[frames[-1].index] == 1
+                    done = [self._enqueue(f, control=False) for f in frames]
+                    sent_at = await done[-1]
+                    await self._await_ack(out, acked, sess, sent_at, sample=fresh)
+            finally:
+                del self._outgoing[(peer, session, seq)]
+                self.stats.frames_retransmitted += out.retransmissions
+            sess.last_heard = self.clock.now()
+            self.stats.messages_sent += 1
+            log.debug(
+                "node %d -> %d session %d: message %d of %d B acknowledged (%d fragments, "
+                "%d retransmitted)",
+                self.node,
+                peer,
+                session,
+                seq,
+                len(data),
+                len(out.fragments),
+                out.retransmissions,
+            )
+
+    async def _await_ack(
+        self, out: Outgoing, acked: asyncio.Event, sess: Session, sent_at: float, sample: bool
+    ) -> None:
+        timer = self._timer(sess.peer)
+        while True:
+            # Jitter: two nodes that both wait for an ACK must not probe in lockstep, or their
+            # probes collide forever.
+            wait = timer.rto * (1.0 + _JITTER.random() / 2)
+            try:
+                await self.clock.wait_for(acked.wait(), wait)
+            except TimeoutError:
+                self._raise_if_aborted(sess)
+                if self.clock.now() - sess.last_heard < timer.rto:
+                    continue  # the peer is on the air in this session: it cannot hear a poll
+                timer.timed_out()
+                acked.clear()
+                probe = out.probe()
+                sent_at, sample = await self._enqueue(probe, control=True), False
+                self.stats.polls_sent += probe.type is FrameType.POLL
+                continue
+            self._raise_if_aborted(sess)
+            timer.answered()
+            if sample:
+                timer.sample(self.clock.now() - sent_at)
+            return
+
+    async def receive(self, peer: int, session: int, idle_timeout: float | None = None) -> bytes:
+        """The session's next message; LinkTimeout after ``idle_timeout`` of silence."""
+        sess = self._session(peer, session)
+        limit = self.idle_timeout if idle_timeout is None else idle_timeout
+        while True:
+            if sess.inbox.empty():
+                self._raise_if_aborted(sess)
+            remaining = sess.last_heard + limit - self.clock.now()
+            if remaining <= 0 and sess.inbox.empty():
+                raise LinkTimeout(f"nothing from node {peer} for {limit:.0f} s")
+            try:
+                item = await self.clock.wait_for(sess.inbox.get(), max(remaining, 0.0))
+            except TimeoutError:
+                continue
+            if isinstance(item, LinkError):  # the peer aborted, or the link failed
+                raise item
+            self.stats.messages_received += 1
+            log.debug(
+                "node %d <- %d session %d: message of %d B", self.node, peer, session, len(item)
+            )
+            return item
+
+    async def beacon(self, payload: bytes) -> None:
+        """Broadcast one beacon (unacknowledged; it spends the data budget, not the reserve
+        kept for acknowledgements): one frame, or a few fragments where the profile's frames
+        are small (US915 SF9), which a receiver puts together or drops whole."""
+        seq, self._beacon_seq = self._beacon_seq, (self._beacon_seq + 1) & 0xFF
+        frames = beacon_frames(self.node, seq, payload, self.payload_size)
+        done = [self._enqueue(frame, control=False) for frame in frames]
+        for sent in done:
+            await sent
+
+    def _raise_if_aborted(self, sess: Session) -> None:
+        if self.radio.error is not None:
+            raise self.radio.error
+        if sess.aborted is not None:
+            raise sess.aborted
+        if (sess.peer, sess.session) not in self._sessions:
+            raise LinkError(f"session {sess.session} with node {sess.peer} was closed")
+
+    def _timer(self, peer: int) -> RetransmissionTimer:
+        timer = self._timers.get(peer)
+        if timer is None:
+            p = self.profile
+            ack = p.airtime(OVERHEAD + 2 + MAX_ACK_BITMAP)
+            # The peer may still be sending one frame, then turns around and acknowledges.
+            model = (
+                p.airtime(self.frame_size)
+                + ack
+                + 2 * (p.turnaround_s + self.config.latency_allowance_s)
+            )
+            # A peer that spent its duty-cycle budget may stay silent for up to a window: the
+            # backoff must let 20 probes outlast that.  Elsewhere silence means trouble.
+            limit = p.duty_window_s / 8 if p.duty_cycle else 30 * model
+            timer = self._timers[peer] = RetransmissionTimer(model, limit)
+        return timer
+
+    # ------------------------------------------------------------------ radio
+
+    def _enqueue(self, frame: Frame, *, control: bool) -> asyncio.Future[float]:
+        return self.radio.enqueue(frame.encode(), control=control)
+
+    async def _housekeeping(self) -> None:
+        while True:
+            await self.clock.sleep(max(self.idle_timeout / 4, 1.0))
+            now = self.clock.now()
+            for peer, session in self._sessions:
+                self.receiver.touch(peer, session, now)  # open: keep what it delivered
+            self.receiver.expire(now)
+            for key in [k for k, t in self._closed.items() if now - t > self.idle_timeout]:
+                del self._closed[key]
+                self._aborted.pop(key, None)
+
+    def _on_bytes(self, data: bytes) -> None:
+        try:
+            frame = decode_frame(data)
+        except FrameError as exc:
+            self.stats.drop(exc.reason)
+            return
+        now = self.clock.now()
+        if frame.type is not FrameType.BEACON:
+            self._last_traffic = now  # a run on the air, ours or another pair's
+        if frame.dst not in (self.node, BROADCAST):
+            return  # overheard: another pair's traffic
+        self.stats.frames_received += 1
+        self.stats.bytes_received += len(data)
+        key = (frame.src, frame.session)
+        sess = self._sessions.get(key)
+        if sess is not None:
+            sess.last_heard = now
+        # Any frame of the session (an ACK of our message too) shows the peer is still in it:
+        # the receiver must go on recognising copies of what it already delivered.
+        self.receiver.touch(frame.src, frame.session, now)
+        if frame.type in (FrameType.DATA, FrameType.POLL) and key in self._aborted:
+            if frame.type is FrameType.POLL or frame.flags & Flag.ACK_REQ:
+                self._enqueue(self._aborted[key], control=True)
+        elif frame.type in (FrameType.DATA, FrameType.POLL):
+            delivered, ack = self.receiver.on_frame(frame, now)
+            if ack is not None:
+                self._enqueue(ack, control=True)
+                self.stats.acks_sent += 1
+            if delivered is not None:
+                self._deliver(delivered, now)
+        elif frame.type is FrameType.ACK:
+            entry = self._outgoing.get((frame.src, frame.session, frame.seq))
+            if entry is not None and entry[0].on_ack(frame):
+                entry[1].set()
+        elif frame.type is FrameType.ABORT:
+            check = None if sess is None else sess.abort_check
+            if check is not None and not check(frame.payload[0], frame.payload[1:]):
+                self.stats.drop("unproven_abort")  # anybody's: the run goes on
+                return
+            if sess is not None and sess.aborted is None:
+                sess.aborted = PeerAborted(AbortCode(frame.payload[0]))
+                sess.inbox.put_nowait(sess.aborted)
+                for (peer, session, _), (_, event) in self._outgoing.items():
+                    if (peer, session) == key:
+                        event.set()
+            self.receiver.forget_session(*key)
+        elif frame.type is FrameType.BEACON:
+            payload = self._beacon_parts.add(frame, now)
+            if payload is not None:
+                if self.beacons.full():
+                    self.beacons.get_nowait()
+                self.beacons.put_nowait((frame.src, payload))
+
+    def _deliver(self, message: Delivered, now: float) -> None:
+        key = (message.src, message.session)
+        if key in self._closed:
+            self.stats.drop("closed_session")
+            return
+        sess = self._sessions.get(key)
+        if sess is None:
+            if len(self._sessions) >= self.config.max_sessions:
+                self.stats.drop("too_many_sessions")
+                return
+            sess = self._sessions[key] = Session(
+                message.src, message.session, now, arrived=message.started
+            )
+            self._accept.put_nowait(key)
+        sess.inbox.put_nowait(message.data)

@@ -1,0 +1,134 @@
+"""One radio's transmit queue, within its regulation.
+
+Control frames (ACK, POLL, ABORT) go before data; every frame waits for the duty-cycle budget
+(:class:`~companion.radio.airtime.DutyCycle`, data leaving a reserve for control), listens
+before talking where the transport can sense the channel (LoRa channel activity detection),
+and frames are spaced by the radio's turnaround time.  The endpoint
+(:class:`~companion.radio.endpoint.LinkEndpoint`) enqueues encoded frames and awaits the time
+each one left.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import random
+from collections import deque
+from dataclasses import dataclass
+
+from companion.radio.airtime import DutyCycle, LinkProfile
+from companion.radio.arq import LinkError
+from companion.radio.clock import Clock
+from companion.radio.stats import LinkStats
+from companion.radio.transport import Transport
+
+_JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
+
+MAX_DEFER_S = 8.0  # listen before talk gives up waiting after this long (or three of the
+# profile's longest frames, if longer: at SF12 one frame is 8 s on the air)
+
+
+def _consume(future: asyncio.Future[float]) -> None:
+    future.exception()  # marks the exception retrieved
+
+
+@dataclass
+class _TxItem:
+    data: bytes
+    airtime: float
+    control: bool
+    done: asyncio.Future[float]
+
+
+class Transmitter:
+    """The queue in front of ``transport``; :meth:`run` is the endpoint's transmit task."""
+
+    def __init__(
+        self,
+        transport: Transport,
+        profile: LinkProfile,
+        duty: DutyCycle,
+        stats: LinkStats,
+        clock: Clock,
+    ) -> None:
+        self.transport, self.profile, self.duty = transport, profile, duty
+        self.stats, self.clock = stats, clock
+        self.running = False
+        self.error: LinkError | None = None  # why it stopped for good (its task died)
+        self._control: deque[_TxItem] = deque()
+        self._data: deque[_TxItem] = deque()
+        self._wake = asyncio.Event()
+
+    def enqueue(self, data: bytes, *, control: bool) -> asyncio.Future[float]:
+        """Queue one encoded frame; the future gives the link time it finished leaving."""
+        if not self.running:
+            raise self.error or LinkError("link endpoint is not running")
+        done: asyncio.Future[float] = asyncio.get_running_loop().create_future()
+        item = _TxItem(data, self.profile.airtime(len(data)), control, done)
+        (self._control if control else self._data).append(item)
+        self._wake.set()
+        return done
+
+    def budget_wait(self) -> float:
+        """Seconds the frame at the head of the queue must wait for the duty-cycle budget."""
+        queue = self._control if self._control else self._data
+        if not queue:
+            return 0.0
+        now = self.clock.now()
+        item = queue[0]
+        return max(self.duty.earliest(now, item.airtime, control=item.control) - now, 0.0)
+
+    def fail_pending(self, error: LinkError) -> None:
+        """The endpoint closes: a sender waiting on a queued frame gets ``error``."""
+        for item in (*self._control, *self._data):
+            if not item.done.done():  # a sender waiting on it gets the error, nobody else
+                item.done.set_exception(error)
+                item.done.add_done_callback(_consume)
+        self._control.clear()
+        self._data.clear()
+
+    def stop(self, error: LinkError) -> None:
+        """The radio is gone for good (its task died): every queued and later frame fails
+        with ``error``."""
+        self.running = False
+        self.error = error
+        self.fail_pending(error)
+
+    async def run(self) -> None:
+        deferred_since: float | None = None
+        patience = max(MAX_DEFER_S, 3 * self.profile.airtime(self.profile.max_frame))
+        while True:
+            queue = self._control if self._control else self._data
+            if not queue:
+                self._wake.clear()
+                await self._wake.wait()
+                continue
+            item = queue[0]
+            now = self.clock.now()
+            start = self.duty.earliest(now, item.airtime, control=item.control)
+            if start > now:
+                self._wake.clear()
+                with contextlib.suppress(TimeoutError):
+                    await self.clock.wait_for(self._wake.wait(), start - now)
+                self.stats.duty_wait_s += self.clock.now() - now
+                continue  # re-evaluate: a control frame may have arrived
+            sense = getattr(self.transport, "channel_busy", None)
+            if deferred_since is None:
+                deferred_since = now
+            if sense is not None and sense() and now - deferred_since < patience:
+                # Listen before talk: another radio is on the air (LoRa channel activity
+                # detection).  Back off a random few frames' worth and look again.
+                await self.clock.sleep(_JITTER.uniform(0.02, 0.25))
+                continue
+            deferred_since = None
+            queue.popleft()
+            if item.done.cancelled():
+                continue
+            self.duty.record(now, item.airtime)
+            await self.transport.transmit(item.data, item.airtime)
+            self.stats.frames_sent += 1
+            self.stats.bytes_sent += len(item.data)
+            self.stats.airtime_s += item.airtime
+            if not item.done.done():
+                item.done.set_result(self.clock.now())
+            await self.clock.sleep(self.profile.turnaround_s)

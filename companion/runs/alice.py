@@ -1,0 +1,553 @@
+"""Alice's side: which peer to compare with next, and one run with it.
+
+Near runs (what both can reach soon) before full runs, the most urgent peer first, one run on
+the radio at a time; each run is the protocol of :mod:`protocol.intersection` over the link
+(:func:`companion.runs.exchange.run_alice`), watched by the fail-safe while it lasts, and its flags
+become conflicts that the edits turn into altitude levels.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import itertools
+import logging
+import math
+import secrets
+
+from companion.auth.certificate import Certificate
+from companion.auth.session import AuthenticationError, Initiator, Refusal, Route
+from companion.events import EventKind
+from companion.mission.edits import Edits
+from companion.mission.schedule import route_volumes
+from companion.neighbours.beacon import keys_hash
+from companion.neighbours.peers import Peer, distance_m, near_cut, segment_distance_m, time_to_meet
+from companion.neighbours.registry import Neighbour
+from companion.radio.arq import LinkError
+from companion.runs.budget import ALICE, MAX_RUN_WORK, BudgetExceeded, run_work
+from companion.runs.exchange import PeerRefused, run_alice
+from companion.runs.failsafe import too_late
+from companion.runs.progress import RunProgress
+from companion.runs.roles import Role
+from companion.runs.turns import OWN_FULL, OWN_NEAR
+from protocol.compact.plan import message_sizes
+from protocol.errors import ConsistencyError, ProtocolError
+from protocol.geo.grid import GridSpec
+from protocol.geo.volumes import CROSSING, VolumeSpec
+from protocol.geo.volumes import Route as PathRoute
+from protocol.intersection import Alice
+from protocol.messages import Suite
+from protocol.run import MAX_SEGMENTS, Limits
+
+log = logging.getLogger("companion")
+NEAR_SLACK_S = 30.0  # the near run reaches this far past the earliest possible meeting
+NEAR_SLACK = 1.1  # a first run takes this much longer than its estimate (measured on US915
+# SF7 at 10 % loss: 35-41 s against 36.5 s with a fresh OT setup, the setup's computing)
+BOB_GUESS = 4  # Bob's size before he tells it: a remaining route of a few legs (m x m would
+# stretch the horizon of a long route over everything; the run watch uses his real size)
+QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a full run
+GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet channel
+
+
+class AliceRuns(Edits):
+    """Comparing as Alice."""
+
+    async def _alice_loop(self) -> None:
+        """One run at a time: every pending near run before any full run, the most urgent
+        peer first; no new run while we answer a peer (one radio, half duplex)."""
+        while True:
+            with contextlib.suppress(TimeoutError):
+                await self.clock.wait_for(self._wake.wait(), 1.0)
+            self._wake.clear()
+            now = self.clock.now()
+            due = [p for p in self.peers.values() if self._should_compare(p, now)]
+            if not due:
+                continue
+            for peer in due:
+                version = (peer.beacon.mission_version, self.compare_version)
+                if peer.plan_version != version or not peer.plan:
+                    if peer.plan_version != version:
+                        peer.covered, peer.settled, peer.near_run = set(), set(), None
+                    peer.plan, peer.plan_version = self._phases(peer), version
+            # A full run after a near run waits until it is needed (or the channel is quiet):
+            # meanwhile the radio serves every drone's near runs.
+            quiet = not self.endpoint.busy(QUIET_S) and not self._radio.waiting()
+            if self.on_ground and not quiet:
+                # Before take-off nothing is urgent, and a run started while other drones'
+                # run is on the air slows theirs (in flight, perhaps past their deadline):
+                # wait for a quiet channel, a minute at most.
+                if self._ground_wait is None:
+                    self._ground_wait = now
+                if now - self._ground_wait < GROUND_WAIT_S:
+                    continue
+            self._ground_wait = None
+            ready = [p for p in due if p.plan[0][0] == "near" or p.full_after <= now or quiet]
+            if not ready:
+                continue
+            peer = min(ready, key=lambda p: (p.plan[0][0] != "near", self._urgency(p)))
+            phase, horizon = peer.plan[0]
+            try:
+                priority = OWN_NEAR if phase == "near" else OWN_FULL
+                async with self._busy, self._radio.turn(priority):
+                    done = await self._run(peer, phase, horizon)
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:  # nothing may stop the companion
+                log.exception("node %d: comparison failed", self.settings.node)
+                self.record(EventKind.RUN_FAILED, peer=peer.node, error=f"internal: {exc!r}")
+                done = False
+            if done and phase == "full" and peer.full_left:
+                peer.full_left = False  # the full run went in parts: the next part at once
+            elif done:
+                peer.plan.pop(0)
+                if not peer.plan:
+                    peer.compared = peer.plan_version
+                elif phase == "near":
+                    peer.full_after = self._full_deadline(peer, horizon)
+            else:
+                if not peer.busy:  # (busy: the plan stands, the same run is asked again)
+                    peer.plan = []
+                retry = self.settings.retry_after_s if peer.retry_in is None else peer.retry_in
+                peer.next_try, peer.retry_in = self.clock.now() + retry, None
+            self._wake.set()  # look again at once
+
+    def _full_deadline(self, peer: Peer, horizon: int) -> float:
+        """When the full run must start at the latest: so that its result comes before we
+        leave what the near run compared, and before the near run's decisions expire (the
+        peer may be past the path it showed: its horizon at its speed from the near run's
+        start, :meth:`_decided`), less the margin -- a full run of our whole remaining path
+        against the peer's (its beacon's size class).  On the ground: at once."""
+        now = self.clock.now()
+        if self.on_ground:
+            return now
+        speed = max(self.speed_m_s, self.settings.cruise_m_s)
+        start, path = self._remaining_path()
+        covered = [k - start for k in sorted(peer.covered) if k >= start]
+        here = self._here()
+        left = sum(
+            distance_m(here if here is not None and k == 0 else a, b)
+            for k, (a, b) in enumerate(itertools.pairwise(path))
+            if k <= (covered[-1] if covered else -1)
+        )
+        ends = now + left / speed
+        if peer.near_run is not None:
+            ends = min(ends, self._near_expires(peer))
+        grid = self._grid(path)
+        limits = Limits()
+        m = limits.padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
+        n = limits.padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        latest = ends - self._seconds(m, grid, fresh=False, n=n) - self.settings.failsafe.margin_s
+        return max(latest, now)
+
+    def _phases(self, peer: Peer) -> list[tuple[str, int]]:
+        """The runs a comparison with ``peer`` takes: near (what can be reached soon) when the
+        remaining path reaches beyond its horizon, then full (horizon 0: everything)."""
+        _, path = self._remaining_path()
+        phases = [("full", 0)]
+        if self.settings.lookahead_s > 0 and len(path) >= 2:
+            horizon = self._horizon_m(peer, path)
+            if len(self._near(path, horizon)) < len(path):
+                phases.insert(0, ("near", horizon))
+        return phases
+
+    def _horizon_m(self, peer: Peer, path: list[tuple[int, int]]) -> int:
+        """How far ahead the near run looks: past the worst-case time until the peer could
+        be here (a near run that ends before that moment would find nothing), long enough
+        for every peer now due to get its near run (one at a time: the estimate counts them
+        all), and at least lookahead_s of flight.  What lies beyond is the full run's, which
+        follows at once when it is needed before the drone leaves what the near run covered
+        (:meth:`_full_deadline`).  A protected-volume run is about 2.5 times a crossing's
+        bytes: a near run that waited for the full run's time too would cover everything
+        and come too late.  Every term comes from what the beacons and the run sizes already
+        tell: the horizon shows Bob nothing about Alice's path."""
+        speed = max(self.speed_m_s, self.settings.cruise_m_s)  # Bob cuts his path alike
+        grid = self._grid(path)
+        now = self.clock.now()
+        due = [p for p in self.peers.values() if self._should_compare(p, now)] or [peer]
+        runs = sum(self._seconds(2, grid, fresh=p.node not in self.holder_setups) for p in due)
+        # Nothing can happen before the peer could be here (both at cruise speed at least);
+        # reach well past that moment.
+        cruise = self.settings.cruise_m_s
+        meet = time_to_meet(self.position[:2], speed, peer, floor_m_s=cruise, measured=False)
+        meet += NEAR_SLACK_S
+        meet = meet if math.isfinite(meet) else 0.0
+        seconds = max(self.settings.lookahead_s, runs + self.settings.failsafe.margin_s, meet)
+        return round(seconds * speed)
+
+    def _peer_earliest(self, peer: Peer, a: tuple[int, int], b: tuple[int, int]) -> float:
+        """The earliest second from now the peer could come within the separation of our
+        segment a-b: its distance at cruise speed at least (it may have flown since it was
+        last heard), and never before the two drones could meet at all."""
+        speed = max(self.speed_m_s, self.settings.cruise_m_s)
+        cruise = self.settings.cruise_m_s
+        meet = time_to_meet(self.position[:2], speed, peer, floor_m_s=cruise, measured=False)
+        gap = segment_distance_m(peer.position, a, b) - self.settings.separation.horizontal_m
+        reach = max(gap, 0.0) / self._peer_pace(peer) - self._silent_for(peer)
+        return max(meet, reach)
+
+    def _before_meeting(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
+        """How many of a near run's first segments we leave before the peer could come
+        near them (:meth:`_peer_earliest`, less the margin): no volume of the peer's can
+        meet them, and a near run without them is smaller and sooner.  At least two
+        segments stay; the full run compares everything left."""
+        if self.on_ground or len(path) <= 3 or not self.settings.lookahead_s:
+            return 0
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        tolerance = self.settings.separation.tolerance
+        margin = self.settings.failsafe.margin_s
+        skip = 0
+        for j in range(len(path) - 3):  # (two segments stay)
+            earliest = self._peer_earliest(peer, path[j], path[j + 1]) - margin
+            if not math.isfinite(earliest) or schedule.window(start + j, tolerance)[1] >= earliest:
+                break
+            skip += 1
+        return skip
+
+    def _bob_horizon(
+        self,
+        horizon: int,
+        start: int,
+        path: list[tuple[int, int]],
+        peer: Peer,
+        grid: GridSpec,
+        *,
+        fresh: bool,
+    ) -> int:
+        """How far the peer cuts its path in a near run where ours is ``path`` (from segment
+        ``start``): as far as it can fly (at its speed, at least cruise) until we leave the
+        last of our segments, late by our tolerance, plus the margin and the separation.  Our near
+        segments are then flown before the peer can be past its cut, and the full run need
+        not compare them again (:meth:`_decided_by_near`).  But a longer cut may make the
+        peer's side of the near run larger (up to its whole remaining path, its beacon's size
+        class): only when even that run, its estimate stretched by ``NEAR_SLACK`` (the OT
+        setup's computing, collisions), still ends before the peer could be here; otherwise
+        -- and on the ground, whose windows never close -- ``horizon`` as asked, stretched to
+        the same time ahead at the peer's speed (the near run's decisions last as long as
+        the horizon at the peer's speed, :meth:`_decided`)."""
+        # The same time ahead as ours: the peer may fly faster than we do.
+        ours = max(self.speed_m_s, self.settings.cruise_m_s)
+        theirs = self._peer_pace(peer)
+        horizon = max(horizon, math.ceil(horizon * theirs / ours))
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        last = start + len(path) - 2
+        end = schedule.window(last, self.settings.separation.tolerance)[1]
+        if not math.isfinite(end):
+            return horizon
+        reach = theirs * (end + self.settings.failsafe.margin_s)
+        longer = math.ceil(reach + self.settings.separation.horizontal_m)
+        if longer <= horizon:
+            return horizon
+        limits = Limits()
+        m = limits.padded(min(len(path) - 1, MAX_SEGMENTS))
+        n = limits.padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        seconds = self._seconds(m, grid, fresh=fresh, n=n) * NEAR_SLACK
+        return horizon if too_late(seconds, self._urgency(peer), self.settings.failsafe) else longer
+
+    def _decided_by_near(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
+        """How many of a full run's first segments it need not compare: those the near run
+        decided (:meth:`_decided`), and those we leave (late by our tolerance) before the
+        full run's result can come -- for them it could only come too late; the fail-safe
+        watches them until the near run's decision expires.  A full run without them is
+        smaller and sooner."""
+        if peer.near_run is None or self.on_ground:
+            return 0
+        decided = self._decided(peer)
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        tolerance = self.settings.separation.tolerance
+        grid = self._grid(path)
+        skip = 0
+        for j in range(len(path) - 2):  # (one segment stays)
+            k = start + j
+            if k in decided:
+                skip += 1
+                continue
+            if k not in peer.covered:
+                break
+            m = Limits().padded(min(len(path) - 2 - j, MAX_SEGMENTS))
+            n = min(m, BOB_GUESS)
+            if schedule.window(k, tolerance)[1] >= self._seconds(m, grid, fresh=False, n=n):
+                break
+            skip += 1
+        return skip
+
+    def _full_chunk(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
+        """How many segments of ``path`` (from segment ``start``, what a full run has left to
+        compare) the next full run takes: all of them, unless a run of all would come too
+        late for the first -- later than we enter it, and than the peer could be here -- and
+        a smaller one would not: then the most, in powers of two, that come in time (at least
+        two).  The next run takes the rest at once: the full run goes in parts, the urgent
+        part first.  On the ground (nothing is urgent) all of them.  Never more than the peer
+        answers (:meth:`_most_segments`)."""
+        segments = min(len(path) - 1, self._most_segments(peer, path))
+        if self.on_ground or segments <= 2:
+            return segments
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        enter = schedule.window(start, self.settings.separation.tolerance)[0]
+        deadline = max(enter, self._urgency(peer))
+        grid = self._grid(path)
+        n = Limits().padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        fresh = peer.node not in self.holder_setups
+        m = Limits().padded(min(segments, MAX_SEGMENTS))
+        while m > 2:
+            seconds = self._seconds(m, grid, fresh=fresh, n=n)
+            if not too_late(seconds, deadline, self.settings.failsafe):
+                break
+            m //= 2
+        return min(m, segments)
+
+    def _most_segments(self, peer: Peer, path: list[tuple[int, int]]) -> int:
+        """The most segments of ``path`` one run may take: what the peer answers
+        (:data:`companion.runs.budget.MAX_RUN_WORK`, with its size class and our grid)."""
+        n = Limits().padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        grid = self._grid(path)
+        m = MAX_SEGMENTS
+        while m > 1 and run_work(m, n, grid.range) > MAX_RUN_WORK:
+            m //= 2
+        return m
+
+    async def _run(self, peer: Peer, phase: str, horizon: int) -> bool:
+        """One run; True when it ended with a result (or had nothing to compare)."""
+        start, path = self._remaining_path()
+        if phase == "near":
+            skip = self._before_meeting(peer, start, path)
+            if skip:  # what is left of the horizon after the segments skipped
+                here = self._here()
+                left = horizon - sum(
+                    distance_m(here if here is not None and k == 0 else a, b)
+                    for k, (a, b) in enumerate(itertools.pairwise(path[: skip + 1]))
+                )
+                peer.settled |= set(range(start, start + skip))  # no volume of its can meet them
+                start, path = start + skip, near_cut(path[skip:], max(left, 1.0), least=2)
+            else:
+                path = self._near(path, horizon)
+            path = path[: self._most_segments(peer, path) + 1]
+        else:
+            skip = self._decided_by_near(peer, start, path)
+            start, path = start + skip, path[skip:]
+            chunk = self._full_chunk(peer, start, path)
+            peer.full_left = chunk < len(path) - 1
+            path = path[: chunk + 1]
+        if len(path) < 2:
+            return True
+        neighbour = self.neighbours.get(peer.node)
+        if neighbour is None or neighbour.fingerprint != peer.identity:
+            self._forget(peer.node)  # its certificate is gone or taken over: not our peer
+            return False
+        op = neighbour.operator
+        if self.settings.suite is Suite.PAPER and not op.paper_keys:
+            # Bob's unproven keys could make what he decrypts depend on our path: only with
+            # drones whose operator vouches for them (trust.operator.paper_keys).
+            error = f"operator {op.name} is not trusted with paper-suite keys (paper_keys)"
+            self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=error)
+            return False
+        try:
+            ticket = self.ledger.admit(
+                peer.identity, op.key.fingerprint, op.max_runs_per_hour, self.clock.wall(), ALICE
+            )
+        except BudgetExceeded as exc:
+            self.record(EventKind.BUDGET, peer=peer.node, error=str(exc))
+            return False
+        done = await self._compare(peer, phase, horizon, start, path, neighbour)
+        if not done:
+            self.ledger.refund(ticket)  # no result: a retry must not use up our runs
+        return done
+
+    async def _compare(
+        self,
+        peer: Peer,
+        phase: str,
+        horizon: int,
+        start: int,
+        path: list[tuple[int, int]],
+        neighbour: Neighbour,
+    ) -> bool:
+        """The run itself (a fresh OT setup again if the peer lost ours).  A near run asks
+        the peer for a little more of its path than it shows of its own (:meth:`_bob_horizon`)
+        so that the full run after it can leave out what the near run decided."""
+        peer.role = Role.ALICE
+        peer.busy = False
+        asked = horizon
+        for attempt in range(2):
+            grid = self._grid(path)
+            setup = self.holder_setups.get(peer.node)
+            if phase == "near":
+                horizon = self._bob_horizon(asked, start, path, peer, grid, fresh=setup is None)
+            try:
+                route, volumes = self._own_route(grid, start, path)
+                alice = Alice(
+                    route,
+                    grid,
+                    suite=self.settings.suite,
+                    setup=setup,
+                    horizon_m=horizon,
+                    volumes=volumes,
+                    ot_security=self.settings.ot_security,
+                    trusted_keys=neighbour.operator.paper_keys,
+                )
+            except ProtocolError as exc:
+                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=str(exc))
+                return False
+            # Bob's size is unknown until his first reply: act at once only if even the
+            # smallest Bob makes the result too late; the watch re-checks with his real size.
+            needed = self._seconds(alice.m, grid, fresh=setup is None, n=1)
+            meet = self._urgency(peer)
+            self.record(
+                EventKind.RUN_STARTED,
+                peer=peer.node,
+                phase=phase,
+                segments=alice.m,
+                first_segment=start,
+                estimate_s=round(needed, 1),
+                time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
+            )
+            if phase == "near":
+                peer.near_run = (self.clock.now(), horizon)
+            if too_late(needed, meet, self.settings.failsafe):
+                await self._precaution(peer, needed, meet)
+            watchdog = asyncio.create_task(self._watch(peer, alice, grid, needed))
+            self._sessions += 1
+            self._own_on_air = alice
+
+            def secure(session: int, cert: Certificate = neighbour.cert) -> Initiator:
+                route = Route(self.settings.node, peer.node, session)
+                return Initiator(self.identity, cert, route, self.clock.wall())
+
+            progress = RunProgress(
+                self.settings.node,
+                self.endpoint,
+                peer.node,
+                Role.ALICE,
+                expected_bytes=functools.partial(self._run_bytes, alice, grid, fresh=setup is None),
+                ends_at=lambda: None if self._running is None else self._running[1],
+            )
+            try:
+                with progress:
+                    report = await run_alice(
+                        self.endpoint,
+                        peer.node,
+                        alice,
+                        secure=secure,
+                        check_keys=lambda boot, public: (
+                            neighbour.beacon_key is not None
+                            and keys_hash(boot, neighbour.beacon_key, public) == neighbour.keys_hash
+                        ),
+                        timeout=self.settings.run_timeout_s,
+                        alive=functools.partial(self._still_heard, peer.node),
+                    )
+            except PeerRefused as exc:
+                if exc.code is Refusal.UNKNOWN_SETUP and attempt == 0:
+                    self.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
+                    self.record(EventKind.SETUP_RENEWED, peer=peer.node)
+                    continue
+                if exc.code is Refusal.ROLE:
+                    peer.role = Role.BOB  # the peer already resolved this pair as Alice
+                    self.record(EventKind.YIELDED, peer=peer.node, reason="the peer is Alice")
+                    return False
+                if exc.code is Refusal.BUSY:
+                    # Its own run is on the air: not a failure, ask again soon (at a random
+                    # moment: others it refused are waiting too).
+                    low, high = self.settings.busy_retry_s
+                    peer.retry_in = low + (high - low) * secrets.randbelow(1001) / 1000
+                    peer.busy = True
+                    self.record(EventKind.PEER_BUSY, peer=peer.node, phase=phase)
+                    return False
+                if exc.code is Refusal.UNKNOWN_PEER:
+                    self._cert_now.set()  # it lacks our certificate: beacon it
+                box = (  # off our beacons, or beyond the peer's limits: which box we asked
+                    {"box_radius_m": grid.radius_m, "resolution_mm": grid.resolution_mm}
+                    if exc.code is Refusal.BOX
+                    else {}
+                )
+                self.record(
+                    EventKind.RUN_FAILED,
+                    peer=peer.node,
+                    phase=phase,
+                    refused=exc.code.name,
+                    **box,
+                )
+                return False
+            except AuthenticationError as exc:
+                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, auth=str(exc))
+                return False
+            except ConsistencyError as exc:
+                # The peer's OT extension is not the honest one: it probed our Delta.  Drop
+                # the setup (a wrong guess must not be followed by another on the same Delta).
+                self.holder_setups.pop(peer.node, None)
+                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, deviated=str(exc))
+                return False
+            except (ProtocolError, LinkError, ValueError) as exc:
+                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=str(exc))
+                return False
+            finally:
+                self._sessions -= 1
+                self._own_on_air = None
+                self._running = None
+                watchdog.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await watchdog
+            break
+        else:
+            return False
+        if alice.setup is not None:
+            self.holder_setups[peer.node] = alice.setup
+        flagged = {start + j for j, hit in enumerate(report.hits) if hit}
+        covered = set(range(start, start + len(path) - 1))
+        peer.conflicts = (peer.conflicts - covered) | flagged
+        peer.covered |= covered
+        if phase == "full":
+            peer.settled |= covered
+        self.record(
+            EventKind.RESULT,
+            peer=peer.node,
+            phase=phase,
+            hits=report.hits,
+            first_segment=start,
+            flagged=sorted(flagged),
+            bytes=report.bytes_sent,
+            auth_bytes=report.auth_bytes_sent,
+            cpu_s=round(report.cpu_s, 3),
+            run_s=round(report.wall_s, 1),
+        )
+        if phase == "full" or covered >= self.precaution.get(peer.node, set()):
+            await self._release(peer)
+        await self._replan(f"result of the {phase} run with {peer.node}")
+        return True
+
+    def _own_route(
+        self, grid: GridSpec, start: int, path: list[tuple[int, int]]
+    ) -> tuple[PathRoute, VolumeSpec]:
+        """What we compare as Alice: the original mission's path from segment ``start`` on
+        the grid, with its bands and windows (:mod:`companion.mission.schedule`), and the run's
+        volume parameters (epoch: now)."""
+        epoch = int(self.clock.wall())
+        volumes = self._volumes(grid, epoch)
+        points = grid.project_path(path)
+        if volumes == CROSSING:
+            return PathRoute(points), volumes
+        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        bands, windows = route_volumes(
+            schedule,
+            start,
+            len(path) - 1,
+            grid.resolution_mm,
+            self._wall_of_state() - epoch,
+            self.settings.separation.tolerance,
+        )
+        return PathRoute(points, bands, windows), volumes
+
+    def _run_bytes(self, alice: Alice, grid: GridSpec, *, fresh: bool) -> int | None:
+        """Payload bytes the run is expected to move both ways (Bob's size guessed as
+        Alice's until his first reply; None for the paper suite, which has no size model)."""
+        if self.settings.suite is not Suite.COMPACT:
+            return None
+        n = alice.m if alice.n is None else alice.n
+        sizes = message_sizes(
+            alice.m,
+            n,
+            grid,
+            fresh_setup=fresh,
+            ot_security=self.settings.ot_security,
+            volumes=self._volumes(grid),
+        )
+        return sum(size for _, size in sizes)
