@@ -11,6 +11,7 @@ import sys
 
 from companion.cli import commands
 from companion.cli import keys as keys_cli
+from companion.errors import CompanionError
 from companion.radio.airtime import PHY_MAX_FRAME, PROFILES
 from protocol.tools import cli
 
@@ -329,16 +330,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from companion.mission.autopilot import AutopilotError
-    from companion.radio.arq import LinkError
-
     args = _parser().parse_args(argv)
-    expected: tuple[type[BaseException], ...] = (AutopilotError, LinkError)
-    if args.command == "replay":  # PX4 SITL only flies there (its import takes 0.1 s)
-        from companion.sim.px4 import Px4Error
-
-        expected += (Px4Error,)
-    return cli.run(args.func, args, expected)
+    return cli.run(args.func, args, (CompanionError,))
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ from __future__ import annotations
 from collections.abc import MutableMapping, Sequence
 
 from protocol.compact.suite import CompactAlice, CompactBob
-from protocol.errors import InputRangeError, LocalProtocolError, ProtocolError, RemoteProtocolError
+from protocol.errors import InputRangeError, LocalProtocolError, RemoteProtocolError
 from protocol.geo.geometry import Point
 from protocol.geo.grid import GridSpec
 from protocol.geo.volumes import CROSSING, NO_SEPARATION, Route, Separation, VolumeSpec, as_route
@@ -209,12 +209,9 @@ class Bob:
         try:
             self._impl = self._create(Hello.from_bytes(data))
             return self._impl.first_reply()
-        except ProtocolError:
+        except BaseException:
             self._state = State.FAILED
             raise
-        except (ValueError, ArithmeticError, IndexError) as exc:
-            self._state = State.FAILED
-            raise RemoteProtocolError(f"malformed hello: {exc}") from exc
 
     def _create(self, hello: Hello) -> BobSide:
         if hello.suite not in self.suites:

@@ -16,7 +16,7 @@ from typing import TypeVar
 
 from protocol.circuits.boolean import Circuit
 from protocol.circuits.paths import Capsules, Orient, Proj, Range, volume_hits
-from protocol.errors import InputRangeError, LocalProtocolError, ProtocolError, RemoteProtocolError
+from protocol.errors import InputRangeError, LocalProtocolError, RemoteProtocolError
 from protocol.geo.geometry import BobPath, Point, fit_to_box
 from protocol.geo.grid import GridKind
 from protocol.geo.volumes import (
@@ -47,6 +47,11 @@ class Limits:
         if not self.pad_to_power_of_two:
             return segments
         return min(1 << (segments - 1).bit_length(), self.max_segments)
+
+    def public_size(self, segments: int) -> int:
+        """The size a run shows for a path of ``segments`` segments: padded, and cut to
+        ``max_segments`` (the path's tail waits for a later run); the one rule for it."""
+        return self.padded(min(max(segments, 1), self.max_segments))
 
     def peer_size(self, segments: int) -> int:
         """The size the peer announces for its path, refused outside 1..max_segments."""
@@ -194,8 +199,9 @@ class State(enum.Enum):
 class Machine:
     """Shared bookkeeping: the next expected message, and FAILED after any error.
 
-    A suite's machine lists its handlers in ``HANDLERS`` (message type -> method); a message of
-    another type, or with another step number, is the peer's error.
+    A suite's machine dispatches each message by its step number in ``_step`` (unframing it as
+    the type that step expects); a message of another type, or with another step number, is
+    the peer's error.
     """
 
     state: State
@@ -207,12 +213,10 @@ class Machine:
             raise LocalProtocolError(f"run already {self.state.value}")
         try:
             return self._step(data)
-        except ProtocolError:
+        except BaseException:
+            # the peer's error (RemoteProtocolError), or ours -- a bug stays what it is
             self.state = State.FAILED
             raise
-        except (ValueError, ArithmeticError, IndexError) as exc:
-            self.state = State.FAILED
-            raise RemoteProtocolError(f"malformed message: {exc}") from exc
 
     def abort(self) -> None:
         """End the run here (peer gone, time limit): FAILED unless it already finished."""
@@ -268,5 +272,5 @@ def bob_path(source: PathSource, hello: Hello, *, geographic: bool, limits: Limi
     if geographic != (hello.grid.kind is GridKind.GEO):
         raise RemoteProtocolError("peer's grid kind does not match this path's coordinates")
     points = hello.grid.project_path(route.points, checked=False) if geographic else route.points
-    n = limits.padded(min(route.segments, limits.max_segments))
+    n = limits.public_size(route.segments)
     return fit_to_box(points, hello.grid.range, n, route.bands, route.windows)

@@ -22,6 +22,7 @@ import companion.__main__ as companion_cli
 import protocol.__main__ as protocol_cli
 from companion.auth.certificate import Certificate
 from companion.auth.keys import SigningKey
+from companion.cli import commands
 from companion.cli.keys import write_private_key, write_public_key
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "sitl_configs" / "scenarios"
@@ -257,6 +258,26 @@ def test_bad_input_is_one_line_and_exit_2(
 
     assert re.search(message, line), line
     assert {p.name for p in files.iterdir()} == before  # nothing written, nothing left over
+
+
+def test_a_bug_is_exit_3_even_when_it_is_a_value_error(
+    files: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Only the packages' own errors (and OSError) are bad input; a ValueError from a bug is
+    reported as a bug."""
+
+    def broken(*_: object) -> int:
+        raise ValueError("a bug of ours")
+
+    monkeypatch.setattr(commands, "mission_show", broken)
+    mission = files / "m.plan"
+    mission.write_text("{}")
+    assert companion_cli.main(["mission", "show", str(mission)]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "error: internal error: ValueError: a bug of ours (a bug: run again with --debug and "
+        "report the traceback)"
+    ]
 
 
 def test_address_in_use_says_so_with_a_hint(capsys: pytest.CaptureFixture[str]) -> None:

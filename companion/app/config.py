@@ -78,11 +78,14 @@ from companion.mission.schedule import SeparationSettings, Tolerance
 from companion.radio.airtime import PROFILES
 from companion.runs.failsafe import Action, FailsafeSettings
 from protocol.messages import Suite
-from protocol.ot.setup import DEFAULT_SECURITY, SECURITY_LEVELS
+from protocol.ot.setup import SECURITY_LEVELS
 from protocol.run import MAX_SEGMENTS
 
 PROFILE_NAMES = tuple(PROFILES)
 DEFAULT_AUTOPILOT = "udpin://0.0.0.0:14540"  # PX4 SITL instance 0's API link
+# Every default is the settings' own (one place); tests check the example above says them.
+BASE = CompanionSettings(node=1, autopilot_url=DEFAULT_AUTOPILOT)
+TOLERANCE = BASE.separation.tolerance
 
 
 class ConfigError(TableError):
@@ -96,6 +99,9 @@ class LinkSettings:
     hub: tuple[str, int] = ("127.0.0.1", 14600)
     serial: str = "/dev/ttyUSB0"
     baudrate: int = 115200
+
+
+LINK = LinkSettings()
 
 
 @dataclass(frozen=True)
@@ -189,15 +195,17 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     failsafe = doc.table("failsafe")
     separation = doc.table("separation")
     node = doc.optional_integer("node", low=1, high=0xFFFE)
-    transport = link.text("transport", "udp", ("udp", "serial"))
-    profile_name = link.text("profile", "us915-sf7", PROFILE_NAMES)
-    host, _, port = link.text("hub", "127.0.0.1:14600").rpartition(":")
+    transport = link.text("transport", LINK.transport, ("udp", "serial"))
+    profile_name = link.text("profile", LINK.profile, PROFILE_NAMES)
+    host, _, port = link.text("hub", "{}:{}".format(*LINK.hub)).rpartition(":")
     if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
         raise link.fail("expected HOST:PORT with a port 1..65535", "hub")
     level = doc.text("log_level", "info", ("debug", "info", "warning", "error"))
-    offset_m = offset.number("offset_m", 10.0, low=0.0, above=True)
-    direction = offset.text("direction", "up", ("up", "down"))
-    max_altitude_m = offset.number("max_altitude_m", 120.0, low=0.0, above=True)
+    offset_m = offset.number("offset_m", BASE.offset.offset_m, low=0.0, above=True)
+    direction = offset.text("direction", BASE.offset.direction, ("up", "down"))
+    max_altitude_m = offset.number(
+        "max_altitude_m", BASE.offset.max_altitude_m, low=0.0, above=True
+    )
     try:
         offset_settings = OffsetSettings(
             offset_m=offset_m, direction=direction, max_altitude_m=max_altitude_m
@@ -205,11 +213,11 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     except ValueError as exc:
         raise offset.fail(str(exc)) from None
     suites = {s.label: s for s in Suite}
-    suite = doc.text("suite", "compact", list(suites))
-    ot_security = doc.integer("ot_security", DEFAULT_SECURITY)
+    suite = doc.text("suite", BASE.suite.label, list(suites))
+    ot_security = doc.integer("ot_security", BASE.ot_security)
     if ot_security not in SECURITY_LEVELS:
         raise doc.fail(f"one of {', '.join(map(str, SECURITY_LEVELS))}", "ot_security")
-    action = failsafe.text("action", "climb", [a.value for a in Action])
+    action = failsafe.text("action", BASE.failsafe.action.value, [a.value for a in Action])
 
     def positive(table: Table, key: str, default: float, zero: bool = False) -> float:
         return table.number(key, default, low=0.0, above=not zero)
@@ -222,31 +230,37 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
     companion = functools.partial(
         CompanionSettings,
         autopilot_url=autopilot_url,
-        ardupilot=doc.flag("ardupilot", False),
+        ardupilot=doc.flag("ardupilot", BASE.ardupilot),
         suite=suites[suite],
         ot_security=ot_security,
         offset=offset_settings,
-        beacon_interval_s=positive(limits, "beacon_interval_s", 10.0),
-        initiation_range_m=positive(limits, "initiation_range_m", 5000.0),
-        grid_radius_m=positive(limits, "grid_radius_m", 500.0),
-        max_box_radius_m=positive(limits, "max_box_radius_m", 64000.0),
-        max_peer_range_m=positive(limits, "max_peer_range_m", 30000.0),
-        min_grid_resolution_mm=limits.integer("min_grid_resolution_mm", 100, low=1),
-        max_runs_per_peer=limits.integer("max_runs_per_peer", 8, low=1),
-        max_runs_total=limits.integer("max_runs_total", 64, low=1),
-        max_answer_bits_per_peer=limits.integer("max_answer_bits_per_peer", 256, low=1),
-        max_clock_skew_s=positive(limits, "max_clock_skew_s", 30.0),
-        run_timeout_s=positive(limits, "run_timeout_s", 900.0),
-        lookahead_s=positive(limits, "lookahead_s", 60.0, zero=True),
-        failsafe=FailsafeSettings(Action(action), positive(failsafe, "margin_s", 10.0)),
+        beacon_interval_s=positive(limits, "beacon_interval_s", BASE.beacon_interval_s),
+        initiation_range_m=positive(limits, "initiation_range_m", BASE.initiation_range_m),
+        grid_radius_m=positive(limits, "grid_radius_m", BASE.grid_radius_m),
+        max_box_radius_m=positive(limits, "max_box_radius_m", BASE.max_box_radius_m),
+        max_peer_range_m=positive(limits, "max_peer_range_m", BASE.max_peer_range_m),
+        min_grid_resolution_mm=limits.integer(
+            "min_grid_resolution_mm", BASE.min_grid_resolution_mm, low=1
+        ),
+        max_runs_per_peer=limits.integer("max_runs_per_peer", BASE.max_runs_per_peer, low=1),
+        max_runs_total=limits.integer("max_runs_total", BASE.max_runs_total, low=1),
+        max_answer_bits_per_peer=limits.integer(
+            "max_answer_bits_per_peer", BASE.max_answer_bits_per_peer, low=1
+        ),
+        max_clock_skew_s=positive(limits, "max_clock_skew_s", BASE.max_clock_skew_s),
+        run_timeout_s=positive(limits, "run_timeout_s", BASE.run_timeout_s or math.inf),
+        lookahead_s=positive(limits, "lookahead_s", BASE.lookahead_s, zero=True),
+        failsafe=FailsafeSettings(
+            Action(action), positive(failsafe, "margin_s", BASE.failsafe.margin_s)
+        ),
         separation=SeparationSettings(
-            positive(separation, "horizontal_m", 15.0, zero=True),
-            positive(separation, "vertical_m", 10.0, zero=True),
+            positive(separation, "horizontal_m", BASE.separation.horizontal_m, zero=True),
+            positive(separation, "vertical_m", BASE.separation.vertical_m, zero=True),
             Tolerance(
-                positive(separation, "altitude_error_m", 1.0, zero=True),
-                positive(separation, "late_s", 15.0, zero=True),
-                positive(separation, "early_s", 10.0, zero=True),
-                positive(separation, "time_tolerance_rate", 0.15, zero=True),
+                positive(separation, "altitude_error_m", TOLERANCE.altitude_m, zero=True),
+                positive(separation, "late_s", TOLERANCE.late_s, zero=True),
+                positive(separation, "early_s", TOLERANCE.early_s, zero=True),
+                positive(separation, "time_tolerance_rate", TOLERANCE.rate, zero=True),
                 positive(separation, "ground_wait_s", 1.0)
                 if "ground_wait_s" in separation.doc
                 else math.inf,
@@ -257,8 +271,8 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         transport,
         profile_name,
         (host, int(port)),
-        link.text("serial", "/dev/ttyUSB0"),
-        link.integer("baudrate", 115200, low=1),
+        link.text("serial", LINK.serial),
+        link.integer("baudrate", LINK.baudrate, low=1),
     )
     if node is None:  # unknown keys first: a misspelt "nod" says so
         doc.known |= {"identity", "trust"}

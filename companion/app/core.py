@@ -57,7 +57,7 @@ from protocol.intersection import Alice
 from protocol.messages import Suite
 from protocol.ot.setup import DEFAULT_SECURITY, ChooserSetup, HolderSetup
 from protocol.paper.keys import BobKeys
-from protocol.run import MAX_SEGMENTS, Limits
+from protocol.run import DEFAULT_LIMITS
 
 log = logging.getLogger("companion")
 OVER_ITEM_M = 5.0  # this close to its current item's point, the vehicle is holding there
@@ -96,7 +96,7 @@ class CompanionSettings:
     max_answer_bits_per_peer: int = 256  # answer bits (segments x runs) one drone may get
     run_window_s: float = 3600.0
     max_clock_skew_s: float = 30.0  # beacons and run requests further off our clock: refused
-    run_timeout_s: float | None = None
+    run_timeout_s: float | None = 900.0  # a run's time limit (None: none)
     retry_after_s: float = 30.0
     busy_retry_s: tuple[float, float] = (5.0, 15.0)  # a peer busy with its own run: retry
     # after a random wait in this range (drones refused by one busy peer do not all return
@@ -662,7 +662,7 @@ class CompanionCore:
     def _own_size(self) -> int:
         """Our remaining path's padded size (our beacons' size class; as Bob, at most n)."""
         _, path = self._remaining_path()
-        return Limits().padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
+        return DEFAULT_LIMITS.public_size(len(path) - 1)
 
     def _slots(self) -> Slots:
         """The altitude slots the rest of our flight occupies, as the vehicle flies it.  They

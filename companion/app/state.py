@@ -16,6 +16,8 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
+from companion.errors import CompanionError
+
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS runs (t REAL NOT NULL, drone BLOB NOT NULL, operator BLOB NOT NULL,
                                  role TEXT NOT NULL, bits INTEGER NOT NULL DEFAULT 0);
@@ -26,7 +28,7 @@ CREATE TABLE IF NOT EXISTS counters (drone BLOB PRIMARY KEY, counter INTEGER NOT
 OWN = b"own"
 
 
-class StateError(OSError):
+class StateError(CompanionError):
     """The state directory or database cannot be used."""
 
 

@@ -20,8 +20,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from companion.errors import CompanionError
 
-class TableError(ValueError):
+
+class TableError(CompanionError):
     """A value of a TOML file is missing, of the wrong type, out of range or unknown."""
 
 

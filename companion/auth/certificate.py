@@ -17,6 +17,7 @@ import struct
 from dataclasses import dataclass
 
 from companion.auth.keys import FINGERPRINT_SIZE, PUBLIC_SIZE, SIGNATURE_SIZE, PublicKey, SigningKey
+from companion.errors import CompanionError
 
 VERSION = 1
 _BODY = struct.Struct(f">BH{PUBLIC_SIZE}s{FINGERPRINT_SIZE}sII")
@@ -25,7 +26,7 @@ _CONTEXT = b"pdc/cert/v1"
 MAX_NODE = 0xFFFE  # 0xFFFF is the broadcast address
 
 
-class CertificateError(ValueError):
+class CertificateError(CompanionError):
     """A certificate is malformed."""
 
 

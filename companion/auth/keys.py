@@ -22,12 +22,14 @@ from cryptography.exceptions import InvalidSignature, UnsupportedAlgorithm
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
+from companion.errors import CompanionError
+
 PUBLIC_SIZE = 32
 SIGNATURE_SIZE = 64
 FINGERPRINT_SIZE = 8
 
 
-class KeyFileError(ValueError):
+class KeyFileError(CompanionError):
     """A key file cannot be read or written; says which file and why."""
 
 

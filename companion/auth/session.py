@@ -51,6 +51,7 @@ from cryptography.hazmat.primitives.kdf.hkdf import HKDF
 
 from companion.auth.certificate import Certificate
 from companion.auth.keys import FINGERPRINT_SIZE, SIGNATURE_SIZE, SigningKey
+from companion.errors import CompanionError
 from protocol.errors import RemoteProtocolError
 
 CONTEXT = b"pdc/session/v1/"
@@ -59,13 +60,12 @@ EPHEMERAL_SIZE = 32
 BOOT_SIZE = 16
 TAG_SIZE = 16
 _INIT_HEAD = struct.Struct(f">B{FINGERPRINT_SIZE}sI{EPHEMERAL_SIZE}s{SIGNATURE_SIZE}s")
-INIT_OVERHEAD = _INIT_HEAD.size  # 109 bytes on the HELLO
 ACCEPT_OVERHEAD = 1 + EPHEMERAL_SIZE + SIGNATURE_SIZE + TAG_SIZE + BOOT_SIZE  # 129 bytes
 REFUSE_SIZE = 2 + SIGNATURE_SIZE
 ABORT_PROOF_SIZE = 16
 
 
-class AuthenticationError(RemoteProtocolError):
+class AuthenticationError(CompanionError, RemoteProtocolError):
     """A message of the run failed authentication (signature, tag, freshness, identity)."""
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from companion.auth.certificate import Certificate
 from companion.auth.keys import PublicKey
+from companion.errors import CompanionError
 
 
 class UnknownPeers(enum.Enum):
@@ -33,7 +34,7 @@ class Untrusted(enum.Enum):
     WRONG_NODE = "certificate names another node id"
 
 
-class UntrustedPeer(Exception):
+class UntrustedPeer(CompanionError):
     """A certificate the store does not accept; ``reason`` says why."""
 
     def __init__(self, reason: Untrusted, cert: Certificate) -> None:

@@ -30,13 +30,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from companion.errors import CompanionError
 from companion.mission.items import MissionError, MissionItem, normalise
 from companion.mission.personalities import PX4, Personality
 
 log = logging.getLogger(__name__)
 
 
-class AutopilotError(Exception):
+class AutopilotError(CompanionError):
     """The autopilot did not do what was asked (timeout, refusal, mismatch)."""
 
 

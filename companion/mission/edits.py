@@ -25,7 +25,7 @@ from companion.neighbours.peers import Peer
 from companion.runs.failsafe import Action, at_risk, too_late
 from protocol.geo.grid import GridSpec
 from protocol.intersection import Alice
-from protocol.run import Limits
+from protocol.run import DEFAULT_LIMITS
 
 
 class Edits(CompanionCore):
@@ -82,7 +82,7 @@ class Edits(CompanionCore):
                     break
                 first = self._near(path, 1)  # the least a run compares
                 needed = max(ends - now, 0.0) + self._seconds(
-                    Limits().padded(len(first) - 1),
+                    DEFAULT_LIMITS.public_size(len(first) - 1),
                     self._grid(first),
                     fresh=peer.node not in self.holder_setups,
                     n=1,

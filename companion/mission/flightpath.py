@@ -26,16 +26,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from companion.mission.items import (
-    NAV_LAND,
     NAV_LOITER_TIME,
     NAV_LOITER_TO_ALT,
     NAV_LOITER_TURNS,
     NAV_LOITER_UNLIM,
     NAV_RETURN_TO_LAUNCH,
     NAV_SPLINE_WAYPOINT,
-    NAV_TAKEOFF,
-    NAV_VTOL_LAND,
-    NAV_VTOL_TAKEOFF,
     NAV_WAYPOINT,
     MissionError,
     MissionItem,
@@ -60,7 +56,6 @@ MOVABLE = frozenset(
     }
 )
 LOITERS = frozenset({NAV_LOITER_UNLIM, NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LOITER_TO_ALT})
-FIXED_NAV = frozenset({NAV_TAKEOFF, NAV_VTOL_TAKEOFF, NAV_LAND, NAV_VTOL_LAND})
 
 
 class VertexKind(enum.Enum):

@@ -12,6 +12,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, TypeVar
 
+from companion.errors import CompanionError
+
 # MAV_CMD values of NAV items that carry a position
 NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TURNS, NAV_LOITER_TIME = 16, 17, 18, 19
 NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, NAV_LOITER_TO_ALT = 20, 21, 22, 31
@@ -41,7 +43,7 @@ KNOWN_FRAMES = FRAMES_GLOBAL | {1, 2, 4, 7, 8, 9, 12, 13, 14, 15, 16, 17, 18, 19
 MISSION_TYPES = {0: "mission", 1: "fence", 2: "rally"}
 
 
-class MissionError(ValueError):
+class MissionError(CompanionError):
     """A mission (from a file or from the autopilot) is invalid; says which item and why."""
 
 

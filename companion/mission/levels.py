@@ -30,13 +30,15 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+from companion.errors import CompanionError
+
 SLOT_M = 5.0
 BASE_M = -1000.0  # slot 0 starts here (AMSL)
 SLOTS = 32  # announced per beacon, from the lowest occupied; the last means "and above"
 MAX_RAISE_M = 300.0
 
 
-class NoClearAltitude(ValueError):
+class NoClearAltitude(CompanionError):
     """No raise up to MAX_RAISE_M keeps the band clear of the peers' slots."""
 
 

@@ -54,6 +54,7 @@ from dataclasses import dataclass
 from companion.auth.certificate import SIZE as CERT_SIZE
 from companion.auth.certificate import Certificate, CertificateError
 from companion.auth.keys import SIGNATURE_SIZE, PublicKey, SigningKey
+from companion.errors import CompanionError
 from companion.mission.levels import Slots
 from protocol.messages import Suite
 
@@ -74,7 +75,7 @@ MAX_SIZE_CLASS = 8  # 256 segments
 _CONTEXT = b"pdc/beacon/v1"
 
 
-class BeaconError(ValueError):
+class BeaconError(CompanionError):
     """A received beacon is malformed."""
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from companion.neighbours.beacon import Beacon
 from companion.runs.roles import Role
 from protocol.geo.geodesy import ground_offset
-from protocol.run import MAX_SEGMENTS, Limits
+from protocol.run import DEFAULT_LIMITS
 
 MAX_SPEED_M_S = 40.0  # no drone flies faster: beacon speeds are capped, boxes bounded by it
 TRACK_SLACK_M = 200.0  # position error a track allows on top of MAX_SPEED_M_S
@@ -35,10 +35,6 @@ def segment_distance_m(p: tuple[int, int], a: tuple[int, int], b: tuple[int, int
     length2 = dx * dx + dy * dy
     t = 0.0 if length2 == 0 else max(0.0, min(1.0, -(ax * dx + ay * dy) / length2))
     return math.hypot(ax + t * dx, ay + t * dy)
-
-
-def path_length_m(path: Sequence[tuple[int, int]]) -> float:
-    return sum(distance_m(a, b) for a, b in itertools.pairwise(path))
 
 
 def cut_at(
@@ -74,7 +70,7 @@ def near_cut(
     if horizon_m <= 0 or len(path) < 2:
         return list(path)
     segments = max(len(cut_at(path, horizon_m, position)) - 1, least)
-    return list(path[: Limits().padded(min(segments, MAX_SEGMENTS)) + 1])
+    return list(path[: DEFAULT_LIMITS.public_size(segments) + 1])
 
 
 @dataclass
@@ -110,6 +106,12 @@ class Peer:
     # TRACK_SLACK_M plus MAX_SPEED_M_S since the anchor before.  A run's box is checked
     # against it (companion.runs.bob), not against a claim out of nowhere.
     anchor: tuple[float, tuple[int, int]] | None = None
+
+    @property
+    def size(self) -> int:
+        """The padded size of the peer's path, from its beacon's size class (what its runs
+        show)."""
+        return DEFAULT_LIMITS.public_size(1 << self.beacon.size_class)
 
     @property
     def position(self) -> tuple[int, int]:

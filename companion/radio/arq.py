@@ -13,10 +13,11 @@ outstanding, that fragment).  A fragment goes out in at most ``max_tries`` burst
 
 from __future__ import annotations
 
+from companion.errors import CompanionError
 from companion.radio.frames import AbortCode, AckInfo, Flag, Frame, FrameType
 
 
-class LinkError(Exception):
+class LinkError(CompanionError):
     """Base class of the link's errors."""
 
 

@@ -20,6 +20,7 @@ import struct
 import zlib
 from dataclasses import dataclass
 
+from companion.errors import CompanionError
 from companion.radio.airtime import PHY_MAX_FRAME
 
 VERSION = 1
@@ -67,7 +68,7 @@ _ALLOWED_FLAGS = {
 }
 
 
-class FrameError(ValueError):
+class FrameError(CompanionError):
     """A received frame is invalid; ``reason`` is a short counter name."""
 
     def __init__(self, reason: str, detail: str = "") -> None:

@@ -18,13 +18,13 @@ import secrets
 
 from companion.auth.certificate import Certificate
 from companion.auth.session import AuthenticationError, Initiator, Refusal, Route
+from companion.errors import CompanionError
 from companion.events import EventKind
 from companion.mission.edits import Edits
 from companion.mission.schedule import route_volumes
 from companion.neighbours.beacon import keys_hash
 from companion.neighbours.peers import Peer, distance_m, near_cut, segment_distance_m, time_to_meet
 from companion.neighbours.registry import Neighbour
-from companion.radio.arq import LinkError
 from companion.runs.budget import ALICE, MAX_RUN_WORK, BudgetExceeded, run_work
 from companion.runs.exchange import PeerRefused, run_alice
 from companion.runs.failsafe import too_late
@@ -38,7 +38,7 @@ from protocol.geo.volumes import CROSSING, VolumeSpec
 from protocol.geo.volumes import Route as PathRoute
 from protocol.intersection import Alice
 from protocol.messages import Suite
-from protocol.run import MAX_SEGMENTS, Limits
+from protocol.run import DEFAULT_LIMITS, MAX_SEGMENTS
 
 log = logging.getLogger("companion")
 NEAR_SLACK_S = 30.0  # the near run reaches this far past the earliest possible meeting
@@ -134,9 +134,8 @@ class AliceRuns(Edits):
         if peer.near_run is not None:
             ends = min(ends, self._near_expires(peer))
         grid = self._grid(path)
-        limits = Limits()
-        m = limits.padded(min(max(len(path) - 1, 1), MAX_SEGMENTS))
-        n = limits.padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        m = DEFAULT_LIMITS.public_size(len(path) - 1)
+        n = peer.size
         latest = ends - self._seconds(m, grid, fresh=False, n=n) - self.settings.failsafe.margin_s
         return max(latest, now)
 
@@ -238,9 +237,8 @@ class AliceRuns(Edits):
         longer = math.ceil(reach + self.settings.separation.horizontal_m)
         if longer <= horizon:
             return horizon
-        limits = Limits()
-        m = limits.padded(min(len(path) - 1, MAX_SEGMENTS))
-        n = limits.padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        m = DEFAULT_LIMITS.public_size(len(path) - 1)
+        n = peer.size
         seconds = self._seconds(m, grid, fresh=fresh, n=n) * NEAR_SLACK
         return horizon if too_late(seconds, self._urgency(peer), self.settings.failsafe) else longer
 
@@ -264,7 +262,7 @@ class AliceRuns(Edits):
                 continue
             if k not in peer.covered:
                 break
-            m = Limits().padded(min(len(path) - 2 - j, MAX_SEGMENTS))
+            m = DEFAULT_LIMITS.public_size(len(path) - 2 - j)
             n = min(m, BOB_GUESS)
             if schedule.window(k, tolerance)[1] >= self._seconds(m, grid, fresh=False, n=n):
                 break
@@ -286,9 +284,9 @@ class AliceRuns(Edits):
         enter = schedule.window(start, self.settings.separation.tolerance)[0]
         deadline = max(enter, self._urgency(peer))
         grid = self._grid(path)
-        n = Limits().padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        n = peer.size
         fresh = peer.node not in self.holder_setups
-        m = Limits().padded(min(segments, MAX_SEGMENTS))
+        m = DEFAULT_LIMITS.public_size(segments)
         while m > 2:
             seconds = self._seconds(m, grid, fresh=fresh, n=n)
             if not too_late(seconds, deadline, self.settings.failsafe):
@@ -299,7 +297,7 @@ class AliceRuns(Edits):
     def _most_segments(self, peer: Peer, path: list[tuple[int, int]]) -> int:
         """The most segments of ``path`` one run may take: what the peer answers
         (:data:`companion.runs.budget.MAX_RUN_WORK`, with its size class and our grid)."""
-        n = Limits().padded(min(1 << peer.beacon.size_class, MAX_SEGMENTS))
+        n = peer.size
         grid = self._grid(path)
         m = MAX_SEGMENTS
         while m > 1 and run_work(m, n, grid.range) > MAX_RUN_WORK:
@@ -476,7 +474,7 @@ class AliceRuns(Edits):
                 self.holder_setups.pop(peer.node, None)
                 self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, deviated=str(exc))
                 return False
-            except (ProtocolError, LinkError, ValueError) as exc:
+            except (ProtocolError, CompanionError) as exc:
                 self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=str(exc))
                 return False
             finally:

@@ -15,6 +15,7 @@ import math
 
 from companion.app.core import CompanionCore
 from companion.auth.session import AuthenticationError, Init, Refusal, Responder, Route
+from companion.errors import CompanionError
 from companion.events import EventKind
 from companion.mission.items import point_as_segment
 from companion.mission.schedule import T_RANGE_S, route_volumes, run_volumes
@@ -119,7 +120,7 @@ class BobAnswers(CompanionCore):
         except AuthenticationError as exc:
             self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
             return
-        except (ProtocolError, LinkError, ValueError) as exc:
+        except (ProtocolError, CompanionError) as exc:
             self.record(EventKind.ANSWER_FAILED, peer=peer, error=str(exc))
             return
         except Exception as exc:  # nothing may stop the companion

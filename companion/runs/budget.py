@@ -18,6 +18,7 @@ import enum
 from dataclasses import dataclass
 
 from companion.app.state import StateStore
+from companion.errors import CompanionError
 from companion.runs.roles import Role
 
 ALICE, BOB = Role.ALICE, Role.BOB
@@ -47,7 +48,7 @@ class Scope(enum.Enum):
     OPERATOR_BITS = "operator answer-bit"  # what all the drones of one operator may learn
 
 
-class BudgetExceeded(Exception):
+class BudgetExceeded(CompanionError):
     """No run now: ``scope`` says which limit is used up."""
 
     def __init__(self, scope: Scope, limit: int, window_s: float) -> None:

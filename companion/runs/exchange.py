@@ -37,6 +37,7 @@ from functools import partial
 from typing import TypeVar
 
 from companion.auth.session import Accepted, AuthenticationError, Initiator, Refusal, Responder
+from companion.errors import CompanionError
 from companion.radio.arq import LinkError, LinkTimeout, PeerAborted
 from companion.radio.endpoint import LinkEndpoint
 from companion.radio.frames import AbortCode
@@ -54,7 +55,7 @@ QUIET_S = 120.0  # a keyed run's silence (at least) before our last message goes
 LINGER_QUIETS = 4  # Bob keeps a finished run's session this many silences long
 
 
-class PeerRefused(Exception):
+class PeerRefused(CompanionError):
     """The peer declined the run, with a signed reason."""
 
     def __init__(self, code: Refusal) -> None:

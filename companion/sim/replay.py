@@ -266,6 +266,7 @@ async def run_replay(
                 grid_radius_m=scenario.grid_radius_m,
                 grid_resolution_mm=scenario.grid_resolution_mm,
                 lookahead_s=scenario.lookahead_s,
+                run_timeout_s=None,  # a scenario's runs end by its own time limit
                 cruise_m_s=scenario.cruise_m_s,
                 failsafe=FailsafeSettings(action=scenario.failsafe),
                 separation=SeparationSettings(

@@ -13,10 +13,12 @@ import selectors
 from collections.abc import Coroutine
 from typing import Any, TypeVar
 
+from companion.errors import CompanionError
+
 T = TypeVar("T")
 
 
-class SimulationStalled(RuntimeError):
+class SimulationStalled(CompanionError):
     """Every task of a virtual-time simulation waits and no timer is pending."""
 
 

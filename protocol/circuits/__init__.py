@@ -1,0 +1,2 @@
+"""Boolean circuits (:mod:`.boolean`) and the one both suites evaluate (:mod:`.paths`).
+"""

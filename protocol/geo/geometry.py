@@ -32,7 +32,6 @@ from protocol.circuits.boolean import Circuit
 from protocol.circuits.paths import Orient, Proj, segments_meet
 
 Point = tuple[int, int]
-Polyline = tuple[Point, ...]
 
 
 def orient(a: Point, b: Point, p: Point) -> int:

@@ -59,10 +59,6 @@ class DGKPublicKey:
         self.noise_pool = NoisePool(self._public_noise)
 
     @property
-    def ciphertext_size(self) -> int:
-        return self.width
-
-    @property
     def plaintext_modulus(self) -> int:
         return self.u
 
@@ -87,10 +83,6 @@ class DGKPublicKey:
         rho = 1 + secrets.randbelow(self.u - 1)
         value = (gmpy2.powmod(c.value, rho, self.n) * self.noise_pool.take()) % self.n
         return DGKCiphertext(self, value, fresh=True)
-
-    @property
-    def token_size(self) -> int:
-        return self.width
 
     def token(self, c: DGKCiphertext) -> bytes:
         """A DGK zero-test token is the ciphertext itself."""
@@ -266,9 +258,6 @@ class DGKPrivateKey:
     def is_zero(self, c: DGKCiphertext) -> bool:
         """m == 0 (mod u)  iff  c^(v_p) == 1 (mod p)."""
         return bool(gmpy2.powmod(c.value, self.vp, self.p) == 1)
-
-    def token_is_zero(self, data: bytes) -> bool:
-        return self.is_zero(self.public_key.ciphertext_from_bytes(data))
 
     def decrypt(self, c: DGKCiphertext) -> int:
         """m in [0, u) through a table of (g^(v_p))^m mod p."""

@@ -1,10 +1,10 @@
 """Pools of precomputed encryption noise.
 
 Fresh Paillier noise r^n mod n^2 is the expensive part of an encryption (a 2048-bit exponent
-modulo a 4096-bit modulus); DGK noise h^r is the same story at smaller scale.  A drone has idle
-time between encounters, so it precomputes noise and the online encryption becomes a single
-modular multiplication.  When the pool runs dry, noise is computed on demand: slower, never
-weaker.  Each value is handed out once.
+modulo a 4096-bit modulus); DGK noise h^r is the same story at smaller scale.  A pool that was
+filled ahead (:meth:`NoisePool.fill`: the benchmark measures that case; the companion does not
+fill one yet) turns the online encryption into one modular multiplication; an empty pool
+computes noise on demand: slower, never weaker.  Each value is handed out once.
 """
 
 from __future__ import annotations

@@ -11,22 +11,12 @@ from gmpy2 import mpz
 MILLER_RABIN_ROUNDS = 40
 
 
-def random_below(bound: int) -> mpz:
-    """Uniform integer in [0, bound)."""
-    return mpz(secrets.randbelow(int(bound)))
-
-
 def random_unit(modulus: int) -> mpz:
     """Uniform element of Z_modulus^* (rejection sampling; for RSA moduli one try suffices)."""
     while True:
         r = mpz(secrets.randbelow(int(modulus)))
         if r > 0 and gmpy2.gcd(r, modulus) == 1:
             return r
-
-
-def random_nonzero_below(bound: int) -> mpz:
-    """Uniform integer in [1, bound)."""
-    return mpz(1 + secrets.randbelow(int(bound) - 1))
 
 
 def is_probable_prime(n: int) -> bool:

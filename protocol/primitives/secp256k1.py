@@ -59,19 +59,6 @@ def add(p: Point, q: Point) -> Point:
         return None
 
 
-def add_base(p: Point, k: int) -> Point:
-    """P + k * G (libsecp256k1's tweak_add: cheaper than a multiplication)."""
-    k %= ORDER
-    if k == 0:
-        return p
-    if p is None:
-        return base_mul(k)
-    try:
-        return p.add(_scalar(k))
-    except ValueError:
-        return None
-
-
 def neg(p: Point) -> Point:
     """-P: flip the parity byte of the compressed encoding."""
     if p is None:

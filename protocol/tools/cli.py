@@ -39,13 +39,14 @@ EPILOG = (
 )
 
 
-class InputError(ValueError):
+class InputError(ProtocolError):
     """Bad input named by where it is (a file, a flag, a key): one line, exit 2."""
 
 
-# What a command reports as one line and exit 2.  MissionError, ConfigError, ScenarioError
-# and the other file errors are ValueErrors; OSError covers files and sockets.
-EXPECTED: tuple[type[BaseException], ...] = (ValueError, OSError, ProtocolError)
+# What a command reports as one line and exit 2: the package's own errors (a caller adds its
+# package's root, the companion its CompanionError) and OSError for files and sockets.  Any
+# other exception is a bug.
+EXPECTED: tuple[type[BaseException], ...] = (OSError, ProtocolError)
 
 _OS_HINTS = {
     errno.EADDRINUSE: "another process uses this address: stop it or choose another port",

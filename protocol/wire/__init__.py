@@ -1,0 +1,2 @@
+"""Fixed-width encodings: the strict reader of received bytes, integers and bit packing.
+"""

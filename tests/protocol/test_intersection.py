@@ -221,6 +221,24 @@ def test_out_of_order_and_failed_states(ot_pair: Any) -> None:
         alice.receive(hello)
 
 
+def test_a_local_bug_is_not_the_peers_fault(ot_pair: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An IndexError inside our own step stays an IndexError (a bug, exit 3 on the command line,
+    "internal" in the companion's log), never a RemoteProtocolError that blames the peer; the
+    machine still fails."""
+    alice = Alice(((0, 0), (1, 1)), GRID, setup=ot_pair.holder)
+    bob = Bob(((0, 1), (1, 0)), setups=ot_pair.setups)
+    offer = bob.receive(alice.start())
+    assert offer is not None
+
+    def broken(data: bytes) -> bytes | None:
+        raise IndexError("a bug of ours")
+
+    monkeypatch.setattr(alice._impl, "_step", broken)
+    with pytest.raises(IndexError, match="a bug of ours"):
+        alice.receive(offer)
+    assert alice.state is State.FAILED
+
+
 def test_bob_refuses_weak_kappa_and_oversized_paths(keys: Any, ot_pair: Any) -> None:
     weak = Alice(
         ((0, 0), (1, 1)),

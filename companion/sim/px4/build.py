@@ -24,6 +24,8 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.errors import CompanionError
+
 GCS_PORT, ONBOARD_PORT, COMPANION_PORT = 18570, 14580, 14540
 
 PORT_BASES = (GCS_PORT, ONBOARD_PORT, COMPANION_PORT, 14280, 13030, 19450)
@@ -31,7 +33,7 @@ PORT_BASES = (GCS_PORT, ONBOARD_PORT, COMPANION_PORT, 14280, 13030, 19450)
 INSTANCES = range(1, 40)  # 14540 + 39 is the last port below the onboard link's 14580
 
 
-class Px4Error(Exception):
+class Px4Error(CompanionError):
     """The PX4 build or a SITL vehicle did not do what was asked."""
 
 

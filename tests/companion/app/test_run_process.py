@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from companion.app.config import ConfigError, load_config
+from companion.app.config import ConfigError, LinkSettings, load_config
+from companion.app.core import CompanionSettings
 from companion.mission.files import format_wpl
 from protocol.tools.cli import write_atomic
 from tests.companion.missions import HOME, survey
@@ -70,6 +71,28 @@ def test_keys_cli_and_identity_config(tmp_path: Path) -> None:
     config.write_text("node = 4\n" + section.replace("drone4.key", "other.key"))
     with pytest.raises(ConfigError, match="another key"):
         load_config(config)
+
+
+def test_the_config_example_says_the_defaults(tmp_path: Path) -> None:
+    """The annotated example in companion.app.config's docstring gives every setting its
+    default (no identity, no trust: those have none); a config without them loads the same,
+    and both are the settings' own defaults."""
+    import tomllib
+
+    import companion.app.config as config_module
+
+    assert config_module.__doc__ is not None
+    example = config_module.__doc__.split("::", 1)[1].split('"""')[0]
+    text = "\n".join(line[4:] for line in example.splitlines())
+    cut = text.index("[identity]"), text.index("[limits]")
+    tomllib.loads(text)  # the whole example is TOML
+    example_path = tmp_path / "example.toml"
+    example_path.write_text(text[: cut[0]] + text[cut[1] :])
+    from_example = load_config(example_path)
+    bare = load_config(None, {"node": 1})
+    assert from_example == bare
+    assert bare.companion == CompanionSettings(node=1, autopilot_url=bare.companion.autopilot_url)
+    assert bare.link == LinkSettings()
 
 
 def test_config_file_and_flags(tmp_path: Path) -> None:

@@ -22,7 +22,15 @@ from companion.mission.levels import Slots
 from companion.neighbours.beacon import Beacon, CertBeacon
 from companion.neighbours.beacon import keys_hash as beacon_keys_hash
 from companion.radio import PROFILES, Clock, LinkEndpoint
-from companion.radio.frames import OVERHEAD, AbortCode, Flag, Frame, FrameType, decode_frame
+from companion.radio.frames import (
+    OVERHEAD,
+    AbortCode,
+    Flag,
+    Frame,
+    FrameError,
+    FrameType,
+    decode_frame,
+)
 from companion.runs.exchange import RunReport, run_alice
 from companion.sim.fleet import make_fleet
 from companion.sim.medium import Channel, Impairments, SimMedium
@@ -83,7 +91,7 @@ class Tap:
         assert self._deliver is not None
         try:
             frame = decode_frame(data)
-        except ValueError:
+        except FrameError:
             self._deliver(data)
             return
         if self.rewrite is not None:
@@ -200,7 +208,13 @@ async def world(
         endpoint = LinkEndpoint(node, tap, PROFILES[profile], clock=clock)
         autopilot = FakeAutopilot(items)
         c = Companion(
-            CompanionSettings(node=node, autopilot_url="", **(settings or {})),
+            CompanionSettings(
+                node=node,
+                autopilot_url="",
+                # no run limit: the paper suite's CPU, charged to the virtual clock, takes
+                # longer than the product's (the replays run without one too)
+                **({"run_timeout_s": None} | (settings or {})),
+            ),
             endpoint,
             autopilot,  # type: ignore[arg-type]
             creds[node],
