@@ -1,15 +1,18 @@
 """What a companion records of its flight: typed events for logs, reports and tests.
 
 Each :class:`Event` has a time (link seconds since the companion's start or the replay's
-zero), an :class:`EventKind` and its details (names with units: ``t_s``, ``bytes``, ...).
+zero), an :class:`EventKind` and a typed payload (a frozen dataclass; names with units:
+``needed_s``, ``bytes``, ...) that reports read by attribute and logs and JSON by name.
 :class:`EventKind` is a string enum, so JSON reports and logs keep the plain names.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from enum import StrEnum
 from typing import Any
+
+from companion.runs.roles import Phase
 
 
 class EventKind(StrEnum):
@@ -96,13 +99,179 @@ RUN_ENDS = frozenset(
 )
 
 
-@dataclass
+# ------------------------------------------------------------------ what each kind carries
+
+
+@dataclass(frozen=True)
+class MissionRead:  # MISSION
+    items: int
+    segments: int
+    home: bool
+
+
+@dataclass(frozen=True)
+class Problem:  # MISSION_INVALID, PLAN_FAILED, UPLOAD_FAILED
+    error: str
+
+
+@dataclass(frozen=True)
+class PeerHeard:  # PEER
+    peer: int
+    on_ground: bool
+    drone: str  # the drone key's fingerprint (hex)
+    operator: str
+
+
+@dataclass(frozen=True)
+class Stranger:  # UNTRUSTED, INTRUDER (with where it is)
+    peer: int
+    drone: str
+    reason: str | None = None
+    lat_deg_e7: int | None = None
+    lon_deg_e7: int | None = None
+    alt_m_amsl: float | None = None
+    distance_m: int | None = None
+
+
+@dataclass(frozen=True)
+class PeerNote:  # YIELDED, PEER_BUSY, SETUP_RENEWED, REFUSED, RESUMED
+    peer: int
+    phase: Phase | None = None
+    reason: str | None = None
+
+
+@dataclass(frozen=True)
+class PeerFailure:  # BUDGET, RUN_FAILED, ANSWER_FAILED, HOLD_FAILED, RESUME_FAILED
+    """What ended it: ``error`` (ours or the peer's), ``auth`` (authentication), ``deviated``
+    (the peer's OT extension failed its check) or ``refused`` (the peer's refusal code, with
+    the box asked for when it refused the box)."""
+
+    peer: int
+    phase: Phase | None = None
+    error: str | None = None
+    auth: str | None = None
+    deviated: str | None = None
+    refused: str | None = None
+    box_radius_m: float | None = None
+    resolution_mm: int | None = None
+
+
+@dataclass(frozen=True)
+class RunStarted:  # RUN_STARTED
+    peer: int
+    phase: Phase
+    segments: int
+    first_segment: int
+    estimate_s: float
+    time_to_meet_s: float | None
+
+
+@dataclass(frozen=True)
+class RunResult:  # RESULT
+    peer: int
+    phase: Phase
+    hits: list[bool]
+    first_segment: int
+    flagged: list[int]
+    bytes: int
+    auth_bytes: int
+    cpu_s: float
+    run_s: float
+
+
+@dataclass(frozen=True)
+class Answered:  # ANSWERED
+    peer: int
+    bytes: int
+    auth_bytes: int
+    guard_bytes: int
+
+
+@dataclass(frozen=True)
+class Precaution:  # PRECAUTIONARY
+    peer: int
+    action: str
+    segments: list[int]
+    first_segment: int
+    needed_s: float
+    time_to_meet_s: float | None
+    waiting: bool  # no run under way with this peer yet (queued, or a retry)
+
+
+@dataclass(frozen=True)
+class FixedSegments:  # FIXED_SEGMENTS
+    segments: list[int]
+    why: str
+
+
+@dataclass(frozen=True)
+class Uploaded:  # UPLOADED
+    flagged: list[int]
+    raises: dict[str, float]  # segment (as text: JSON keys) -> metres higher
+    verified: bool
+    offset_m: float
+    inserted: int | None
+    clear_of: list[int]
+    why: str
+
+
+@dataclass(frozen=True)
+class Hold:  # HOLD
+    peer: int
+    before_segment: int
+
+
+@dataclass(frozen=True)
+class Retimed:  # RETIMED
+    epoch: int
+    drift_s: float
+    held: bool
+    on_ground: bool
+
+
+@dataclass(frozen=True)
+class TaskFailed:  # TASK_FAILED
+    task: str
+    error: str
+
+
+Payload = (
+    MissionRead
+    | Problem
+    | PeerHeard
+    | Stranger
+    | PeerNote
+    | PeerFailure
+    | RunStarted
+    | RunResult
+    | Answered
+    | Precaution
+    | FixedSegments
+    | Uploaded
+    | Hold
+    | Retimed
+    | TaskFailed
+)
+
+
+@dataclass(frozen=True)
 class Event:
-    """One line of the companion's history (for logs and replay reports)."""
+    """One line of the companion's history (for logs and replay reports): what happened
+    (``kind``) and what it carries (``payload``, typed)."""
 
     t: float
     kind: EventKind
-    detail: dict[str, Any]
+    payload: Payload
+
+    @property
+    def detail(self) -> dict[str, Any]:
+        """The payload as names and values (logs, JSON reports): optional fields that are
+        absent are left out."""
+        return {
+            f.name: getattr(self.payload, f.name)
+            for f in fields(self.payload)
+            if not (f.default is None and getattr(self.payload, f.name) is None)
+        }
 
     @property
     def failed(self) -> bool:

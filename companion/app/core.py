@@ -12,11 +12,12 @@ beaconing, Alice's runs, Bob's answers, and the edits and precautions.
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import math
 import secrets
 import time
-from collections.abc import Sequence
+from collections.abc import Coroutine, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,7 +27,7 @@ from companion.app.state import StateStore
 from companion.auth.beacon_keys import BeaconKeys
 from companion.auth.session import BOOT_SIZE, Identity
 from companion.auth.trust import TrustStore
-from companion.events import WARNINGS, Event, EventKind
+from companion.events import WARNINGS, Event, EventKind, Payload, Retimed, TaskFailed
 from companion.mission.autopilot import AutopilotBase
 from companion.mission.flight_model import MAX_PREDICTION_S, Kinematics
 from companion.mission.flightpath import FlightPath, flight_path
@@ -41,7 +42,7 @@ from companion.mission.schedule import (
     predict,
     run_volumes,
 )
-from companion.neighbours.beacon import alice_of, keys_hash
+from companion.neighbours.beacon import BeaconKind, alice_of, keys_hash
 from companion.neighbours.beacon_airtime import beacon_interval
 from companion.neighbours.peers import FRESH_S, Peer, distance_m, near_cut, time_to_meet
 from companion.neighbours.registry import Neighbours
@@ -50,6 +51,7 @@ from companion.runs.budget import RunLedger, RunLimits
 from companion.runs.failsafe import FailsafeSettings, run_seconds
 from companion.runs.roles import Role
 from companion.runs.turns import RadioTurns
+from companion.tasks import spawn
 from protocol.compact.plan import message_sizes
 from protocol.geo.grid import GridSpec
 from protocol.geo.volumes import CROSSING, VolumeSpec
@@ -200,7 +202,7 @@ class CompanionCore:
         self._asking: dict[int, tuple[float, float]] = {}  # node -> (next ask, interval)
         self.rejected: dict[str, int] = {}  # beacons dropped, by reason
         self.beacon_bytes = 0  # beacon payloads we sent (position and certificate)
-        self.beacons_sent = {"signed": 0, "tagged": 0, "certificate": 0}
+        self.beacons_sent = dict.fromkeys(BeaconKind, 0)
         self.holder_setups: dict[int, HolderSetup] = {}  # peer -> ours as Alice
         self.chooser_setups: dict[int, dict[bytes, ChooserSetup]] = {}  # peer -> ours as Bob
         self.peers: dict[int, Peer] = {}
@@ -234,7 +236,6 @@ class CompanionCore:
         self.current_item = 0
         self.has_flown = False  # airborne at least once since the companion started
         self._heard_autopilot = time.monotonic()  # the last position (real seconds)
-        self._tasks: list[asyncio.Task[None]] = []
         self._children: set[asyncio.Task[None]] = set()
         self._busy = asyncio.Lock()
         self._radio = RadioTurns()  # one run on the air at a time, as Alice or Bob
@@ -252,30 +253,31 @@ class CompanionCore:
         self._ground_wait: float | None = None  # since when a run waits for a quiet channel
         self.epoch = 0.0
 
-    def record(self, kind: EventKind, **detail: Any) -> None:
+    def record(self, kind: EventKind, payload: Payload) -> None:
         """An event at link seconds since :attr:`epoch` (the start, or the replay's zero),
         logged as ``key=value`` text and as a JSON line (:mod:`companion.app.logs`)."""
-        t = self.clock.now() - self.epoch
-        self.events.append(Event(t, kind, detail))
+        event = Event(self.clock.now() - self.epoch, kind, payload)
+        self.events.append(event)
         level = logging.WARNING if kind in WARNINGS else logging.INFO
         text = f"node {self.settings.node}: {kind.replace('_', ' ')}"
-        logs.event(log, level, kind, text, t_s=round(t, 1), **detail)
+        logs.event(log, level, kind, text, t_s=round(event.t, 1), **event.detail)
 
-    def _spawn(self, work: Any) -> None:
-        task = asyncio.create_task(work)
+    def _spawn(self, work: Coroutine[Any, Any, None], name: str = "child") -> asyncio.Task[None]:
+        """A task of ours (:func:`companion.tasks.spawn`: a failure is logged with its
+        traceback at once) whose failure the companion also records -- a companion whose
+        beacons or answers died must say so, not go quiet; cancelled at :meth:`stop`."""
+        task = spawn(
+            work,
+            name=f"node{self.settings.node}-{name}",
+            log=log,
+            on_failure=functools.partial(self._task_failed, name),
+        )
         self._children.add(task)
-        task.add_done_callback(self._ended)
+        task.add_done_callback(self._children.discard)
+        return task
 
-    def _ended(self, task: asyncio.Task[None]) -> None:
-        """A task of ours ended: a failure is logged with its traceback and recorded (a
-        companion whose beacons or answers died must say so, not go quiet)."""
-        self._children.discard(task)
-        if task.cancelled():
-            return
-        exc = task.exception()
-        if exc is not None:
-            log.error("node %d: task %s failed", self.settings.node, task.get_name(), exc_info=exc)
-            self.record(EventKind.TASK_FAILED, task=task.get_name(), error=repr(exc))
+    def _task_failed(self, name: str, exc: BaseException) -> None:
+        self.record(EventKind.TASK_FAILED, TaskFailed(task=name, error=repr(exc)))
 
     @property
     def in_run(self) -> bool:
@@ -603,10 +605,12 @@ class CompanionCore:
         self.retimed += 1
         self.record(
             EventKind.RETIMED,
-            epoch=self.retimed,
-            drift_s=round(drift, 1),
-            held=drift == 0.0 and not ground,
-            on_ground=ground,
+            Retimed(
+                epoch=self.retimed,
+                drift_s=round(drift, 1),
+                held=drift == 0.0 and not ground,
+                on_ground=ground,
+            ),
         )
         self._beacon_now.set()
 

@@ -33,7 +33,7 @@ import time
 
 from companion.app import logs
 from companion.app.core import TIMING_EVERY_S, CompanionSettings, Credentials
-from companion.events import EventKind
+from companion.events import EventKind, MissionRead, Problem
 from companion.mission.flightpath import flight_path
 from companion.mission.items import MissionError
 from companion.neighbours.beaconing import Beaconing
@@ -62,30 +62,31 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
         try:
             self.path = flight_path(self.mission, home, ardupilot=self.settings.ardupilot)
         except MissionError as exc:  # e.g. a DO_JUMP to nowhere: fly, but compare nothing
-            self.record(EventKind.MISSION_INVALID, error=str(exc))
+            self.record(EventKind.MISSION_INVALID, Problem(error=str(exc)))
         self.record(
             EventKind.MISSION,
-            items=len(self.mission),
-            segments=self.path.segments,
-            home=self.home is not None or self.settings.ardupilot,
+            MissionRead(
+                items=len(self.mission),
+                segments=self.path.segments,
+                home=self.home is not None or self.settings.ardupilot,
+            ),
         )
         await self.endpoint.start()
-        self._tasks = [
-            asyncio.create_task(self._telemetry(), name="telemetry"),
-            asyncio.create_task(self._progress(), name="progress"),
-            asyncio.create_task(self._armed(), name="armed"),
-            asyncio.create_task(self._flight_mode(), name="flight mode"),
-            asyncio.create_task(self._autopilot_watch(), name="autopilot watch"),
-            asyncio.create_task(self._certificates(), name="certificates"),
-            asyncio.create_task(self._beacons(), name="beacons"),
-            asyncio.create_task(self._listen(), name="listen"),
-            asyncio.create_task(self._serve(), name="serve"),
-            asyncio.create_task(self._alice_loop(), name="alice"),
-            asyncio.create_task(self._guard(), name="guard"),
-            asyncio.create_task(self._timing_watch(), name="timing"),
-        ]
-        for task in self._tasks:
-            task.add_done_callback(self._ended)
+        for name, work in (
+            ("telemetry", self._telemetry),
+            ("progress", self._progress),
+            ("armed", self._armed),
+            ("flight mode", self._flight_mode),
+            ("autopilot watch", self._autopilot_watch),
+            ("certificates", self._certificates),
+            ("beacons", self._beacons),
+            ("listen", self._listen),
+            ("serve", self._serve),
+            ("alice", self._alice_loop),
+            ("guard", self._guard),
+            ("timing", self._timing_watch),
+        ):
+            self._spawn(work(), name)
 
     async def stop(self) -> None:
         """Cancel every task and close the radio and the store.  A mission edit under way is
@@ -95,9 +96,10 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(self._edit_lock.acquire(), EDIT_GRACE_S)
             editing = True
-        for task in [*self._tasks, *self._children]:
+        tasks = list(self._children)
+        for task in tasks:
             task.cancel()
-        for task in [*self._tasks, *self._children]:
+        for task in tasks:
             with contextlib.suppress(asyncio.CancelledError):
                 try:  # bounded: a stop never hangs on one task
                     await asyncio.wait_for(asyncio.shield(task), 5.0)

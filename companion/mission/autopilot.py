@@ -33,6 +33,7 @@ from typing import Any
 from companion.errors import CompanionError
 from companion.mission.items import MissionError, MissionItem, normalise
 from companion.mission.personalities import PX4, Personality
+from companion.tasks import spawn
 
 log = logging.getLogger(__name__)
 
@@ -335,7 +336,7 @@ class Autopilot(AutopilotBase):
 
         # Positions flow while the rate is asked for: an autopilot that never answers the
         # request would otherwise hold the first position back 5 s (100 s of flight at 20x).
-        rate = asyncio.create_task(set_rate())
+        rate = spawn(set_rate(), name="position-rate", log=log)
         try:
             async for p in telemetry.subscribe_position():
                 yield Position(

@@ -13,7 +13,16 @@ from __future__ import annotations
 import math
 
 from companion.app.core import CompanionCore, same_track
-from companion.events import EventKind
+from companion.events import (
+    EventKind,
+    FixedSegments,
+    Hold,
+    PeerFailure,
+    PeerNote,
+    Precaution,
+    Problem,
+    Uploaded,
+)
 from companion.mission.autopilot import AutopilotError
 from companion.mission.flightpath import DO_JUMP
 from companion.mission.items import MissionError
@@ -118,13 +127,15 @@ class Edits(CompanionCore):
             return
         self.record(
             EventKind.PRECAUTIONARY,
-            peer=peer.node,
-            action=settings.action.value,
-            segments=risky,
-            first_segment=start,
-            needed_s=round(needed, 1),
-            time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
-            waiting=waiting,  # no run under way with this peer yet (queued, or a retry)
+            Precaution(
+                peer=peer.node,
+                action=settings.action.value,
+                segments=risky,
+                first_segment=start,
+                needed_s=round(needed, 1),
+                time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
+                waiting=waiting,
+            ),
         )
         if settings.action is Action.OFF:
             self.precaution[peer.node] = set()  # reported once; nothing flies differently
@@ -147,9 +158,9 @@ class Edits(CompanionCore):
             return
         try:
             await self.autopilot.pause()
-            self.record(EventKind.HOLD, peer=peer, before_segment=segment)
+            self.record(EventKind.HOLD, Hold(peer=peer, before_segment=segment))
         except AutopilotError as exc:
-            self.record(EventKind.HOLD_FAILED, peer=peer, error=str(exc))
+            self.record(EventKind.HOLD_FAILED, PeerFailure(peer=peer, error=str(exc)))
 
     async def _release(self, peer: Peer) -> None:
         """The result is in: precautions for this peer end."""
@@ -159,9 +170,11 @@ class Edits(CompanionCore):
             if not self._holding:
                 try:
                     await self.autopilot.resume()
-                    self.record(EventKind.RESUMED, peer=peer.node)
+                    self.record(EventKind.RESUMED, PeerNote(peer=peer.node))
                 except AutopilotError as exc:
-                    self.record(EventKind.RESUME_FAILED, peer=peer.node, error=str(exc))
+                    self.record(
+                        EventKind.RESUME_FAILED, PeerFailure(peer=peer.node, error=str(exc))
+                    )
 
     def _planned_bands(self) -> dict[int, tuple[float, float]]:
         """Every segment's band off the ground as planned (the original mission flown from
@@ -215,7 +228,7 @@ class Edits(CompanionCore):
                     keep_clear=clear_of,
                 )
             except NoClearAltitude as exc:
-                self.record(EventKind.PLAN_FAILED, error=str(exc))
+                self.record(EventKind.PLAN_FAILED, Problem(error=str(exc)))
                 return
             # A raise only grows while its conflict stands: a peer whose announced slots
             # shrink (it flew on, it landed) is no reason for another edit in flight.
@@ -227,11 +240,11 @@ class Edits(CompanionCore):
                     self.original, raises, offset, path=self.path, vehicle=self._edit_vehicle()
                 )
             except PlannerError as exc:
-                self.record(EventKind.PLAN_FAILED, error=str(exc))
+                self.record(EventKind.PLAN_FAILED, Problem(error=str(exc)))
                 return
             fixed = fixed_segments(self.path, raises)
             if fixed:  # e.g. the last leg into a landing: its end may not move
-                self.record(EventKind.FIXED_SEGMENTS, segments=fixed, why=why)
+                self.record(EventKind.FIXED_SEGMENTS, FixedSegments(segments=fixed, why=why))
             try:
                 # The edit is built on what the vehicle holds now and keeps the item it is
                 # flying: PX4 restarts a mission at the item an upload marks current.
@@ -259,7 +272,7 @@ class Edits(CompanionCore):
                 sent_at = self.clock.now()
                 await self.autopilot.replace_mission(new, held)
             except (AutopilotError, MissionError) as exc:
-                self.record(EventKind.UPLOAD_FAILED, error=str(exc))
+                self.record(EventKind.UPLOAD_FAILED, Problem(error=str(exc)))
                 return
             self.mission, self.raises = new, raises
             # Where the vehicle flies on: what it reported since the upload, or the item
@@ -272,11 +285,13 @@ class Edits(CompanionCore):
             self.flagged = {k for p in self.peers.values() for k in p.conflicts}
             self.record(
                 EventKind.UPLOADED,
-                flagged=sorted(raises),
-                raises={str(k): v for k, v in sorted(raises.items())},
-                verified=True,
-                offset_m=offset.delta,
-                inserted=edit.inserted,
-                clear_of=clear_of,  # peers whose altitudes the raises keep clear of as well
-                why=why,
+                Uploaded(
+                    flagged=sorted(raises),
+                    raises={str(k): v for k, v in sorted(raises.items())},
+                    verified=True,
+                    offset_m=offset.delta,
+                    inserted=edit.inserted,
+                    clear_of=clear_of,  # peers whose altitudes the raises keep clear of as well
+                    why=why,
+                ),
             )

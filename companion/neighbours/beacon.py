@@ -50,6 +50,7 @@ import hashlib
 import hmac
 import struct
 from dataclasses import dataclass
+from enum import StrEnum
 
 from companion.auth.certificate import SIZE as CERT_SIZE
 from companion.auth.certificate import Certificate, CertificateError
@@ -73,6 +74,14 @@ ON_GROUND = 0x01
 WANT = 0x01
 MAX_SIZE_CLASS = 8  # 256 segments
 _CONTEXT = b"pdc/beacon/v1"
+
+
+class BeaconKind(StrEnum):
+    """What a beacon we send is (counted per kind)."""
+
+    SIGNED = "signed"  # a position beacon signed with our drone key
+    TAGGED = "tagged"  # a position beacon with a tag for each neighbour
+    CERTIFICATE = "certificate"  # our operator's certificate
 
 
 class BeaconError(CompanionError):

@@ -17,9 +17,9 @@ import random
 from companion.app.core import ASK_BACKOFF_S
 from companion.app.state import OWN
 from companion.auth.trust import UnknownPeers
-from companion.events import EventKind
+from companion.events import EventKind, PeerHeard, Stranger
 from companion.mission.edits import Edits
-from companion.neighbours.beacon import Beacon, CertBeacon, size_class
+from companion.neighbours.beacon import Beacon, BeaconKind, CertBeacon, size_class
 from companion.neighbours.peers import Peer, distance_m
 from companion.neighbours.registry import NO_CERTIFICATE, Heard, Hearing
 from companion.radio.arq import LinkError
@@ -43,7 +43,7 @@ class Beaconing(Edits):
         self.store.set_counter(OWN, self._order)
         return self._order >> 8, self._order & 0xFF
 
-    def _beacon(self) -> tuple[bytes, str]:
+    def _beacon(self) -> tuple[bytes, BeaconKind]:
         """Our position beacon (:mod:`companion.neighbours.beacon`): signed when one is due (it
         carries our beacon key and keys hash), else tagged for every neighbour we share a key
         with."""
@@ -69,8 +69,8 @@ class Beaconing(Edits):
             signed = beacon.signed(
                 self.settings.node, self.identity.key, self.beacon_keys.public, self.keys_hash, tags
             )
-            return signed, "signed"
-        return beacon.tagged(self.settings.node, tags), "tagged"
+            return signed, BeaconKind.SIGNED
+        return beacon.tagged(self.settings.node, tags), BeaconKind.TAGGED
 
     def _want_signed(self) -> None:
         """A signed beacon next (rate-limited): somebody lacks our beacon key."""
@@ -78,7 +78,7 @@ class Beaconing(Edits):
             self._sign_next = True
             self._beacon_now.set()
 
-    async def _send_beacon(self, payload: bytes, kind: str) -> None:
+    async def _send_beacon(self, payload: bytes, kind: BeaconKind) -> None:
         with contextlib.suppress(LinkError):
             await self.endpoint.beacon(payload)
             self.beacon_bytes += len(payload)
@@ -97,7 +97,9 @@ class Beaconing(Edits):
             self._cert_now.clear()
             want, self._cert_wanted = self._cert_wanted, False
             self._cert_sent = self.clock.now()
-            await self._send_beacon(CertBeacon(self.identity.cert, want).encode(), "certificate")
+            await self._send_beacon(
+                CertBeacon(self.identity.cert, want).encode(), BeaconKind.CERTIFICATE
+            )
 
     async def _beacons(self) -> None:
         """Beacon every interval (random phase and jitter: drones that beacon in lockstep
@@ -177,10 +179,12 @@ class Beaconing(Edits):
             )
             self.record(
                 EventKind.PEER,
-                peer=src,
-                on_ground=beacon.on_ground,
-                drone=neighbour.fingerprint.hex(),
-                operator=neighbour.operator.name,
+                PeerHeard(
+                    peer=src,
+                    on_ground=beacon.on_ground,
+                    drone=neighbour.fingerprint.hex(),
+                    operator=neighbour.operator.name,
+                ),
             )
             self._beacon_now.set()  # let it hear us without waiting an interval
         elif hearing.new_keys:
@@ -230,7 +234,8 @@ class Beaconing(Edits):
         if drone not in self._ignored:
             self._ignored.add(drone)
             self.record(
-                EventKind.UNTRUSTED, peer=hearing.node, drone=drone.hex(), reason=hearing.reason
+                EventKind.UNTRUSTED,
+                Stranger(peer=hearing.node, drone=drone.hex(), reason=hearing.reason),
             )
         if self.neighbours.trust.unknown is not UnknownPeers.ALERT or hearing.beacon is None:
             return
@@ -239,7 +244,5 @@ class Beaconing(Edits):
             self._alerted[hearing.node] = now
             b = hearing.beacon
             distance = distance_m(self.position[:2], (b.lat, b.lon))
-            self.record(
-                EventKind.INTRUDER, peer=hearing.node, drone=drone.hex(), lat_deg_e7=b.lat,
-                lon_deg_e7=b.lon, alt_m_amsl=b.alt_m, distance_m=round(distance),
-            )  # fmt: skip
+            here = Stranger(hearing.node, drone.hex(), None, b.lat, b.lon, b.alt_m, round(distance))
+            self.record(EventKind.INTRUDER, here)

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from companion.neighbours.beacon import Beacon
-from companion.runs.roles import Role
+from companion.runs.roles import Phase, Role
 from protocol.geo.geodesy import ground_offset
 from protocol.run import DEFAULT_LIMITS
 
@@ -88,7 +88,7 @@ class Peer:
     busy: bool = False  # it refused our last request BUSY: asked again soon
     raised: bool = False  # its announced altitude slots once reached above its first ones
     conflicts: set[int] = field(default_factory=set)  # our segments that meet its path
-    plan: list[tuple[str, int]] = field(default_factory=list)  # runs still to do (phase, horizon)
+    plan: list[tuple[Phase, int]] = field(default_factory=list)  # runs still to do (phase, horizon)
     plan_version: tuple[int, int] | None = None  # the versions the plan was made for
     covered: set[int] = field(default_factory=set)  # our segments a finished run compared
     settled: set[int] = field(default_factory=set)  # ... for good: a full run compared

@@ -19,7 +19,7 @@ import secrets
 from companion.auth.certificate import Certificate
 from companion.auth.session import AuthenticationError, Initiator, Refusal, Route
 from companion.errors import CompanionError
-from companion.events import EventKind
+from companion.events import EventKind, PeerFailure, PeerNote, RunResult, RunStarted
 from companion.mission.edits import Edits
 from companion.mission.schedule import route_volumes
 from companion.neighbours.beacon import keys_hash
@@ -29,7 +29,7 @@ from companion.runs.budget import ALICE, MAX_RUN_WORK, BudgetExceeded, run_work
 from companion.runs.exchange import PeerRefused, run_alice
 from companion.runs.failsafe import too_late
 from companion.runs.progress import RunProgress
-from companion.runs.roles import Role
+from companion.runs.roles import Phase, Role
 from companion.runs.turns import OWN_FULL, OWN_NEAR
 from protocol.compact.plan import message_sizes
 from protocol.errors import ConsistencyError, ProtocolError
@@ -82,28 +82,30 @@ class AliceRuns(Edits):
                 if now - self._ground_wait < GROUND_WAIT_S:
                     continue
             self._ground_wait = None
-            ready = [p for p in due if p.plan[0][0] == "near" or p.full_after <= now or quiet]
+            ready = [p for p in due if p.plan[0][0] is Phase.NEAR or p.full_after <= now or quiet]
             if not ready:
                 continue
-            peer = min(ready, key=lambda p: (p.plan[0][0] != "near", self._urgency(p)))
+            peer = min(ready, key=lambda p: (p.plan[0][0] is not Phase.NEAR, self._urgency(p)))
             phase, horizon = peer.plan[0]
             try:
-                priority = OWN_NEAR if phase == "near" else OWN_FULL
+                priority = OWN_NEAR if phase is Phase.NEAR else OWN_FULL
                 async with self._busy, self._radio.turn(priority):
                     done = await self._run(peer, phase, horizon)
             except asyncio.CancelledError:
                 raise
             except Exception as exc:  # nothing may stop the companion
                 log.exception("node %d: comparison failed", self.settings.node)
-                self.record(EventKind.RUN_FAILED, peer=peer.node, error=f"internal: {exc!r}")
+                self.record(
+                    EventKind.RUN_FAILED, PeerFailure(peer=peer.node, error=f"internal: {exc!r}")
+                )
                 done = False
-            if done and phase == "full" and peer.full_left:
+            if done and phase is Phase.FULL and peer.full_left:
                 peer.full_left = False  # the full run went in parts: the next part at once
             elif done:
                 peer.plan.pop(0)
                 if not peer.plan:
                     peer.compared = peer.plan_version
-                elif phase == "near":
+                elif phase is Phase.NEAR:
                     peer.full_after = self._full_deadline(peer, horizon)
             else:
                 if not peer.busy:  # (busy: the plan stands, the same run is asked again)
@@ -139,15 +141,15 @@ class AliceRuns(Edits):
         latest = ends - self._seconds(m, grid, fresh=False, n=n) - self.settings.failsafe.margin_s
         return max(latest, now)
 
-    def _phases(self, peer: Peer) -> list[tuple[str, int]]:
+    def _phases(self, peer: Peer) -> list[tuple[Phase, int]]:
         """The runs a comparison with ``peer`` takes: near (what can be reached soon) when the
         remaining path reaches beyond its horizon, then full (horizon 0: everything)."""
         _, path = self._remaining_path()
-        phases = [("full", 0)]
+        phases = [(Phase.FULL, 0)]
         if self.settings.lookahead_s > 0 and len(path) >= 2:
             horizon = self._horizon_m(peer, path)
             if len(self._near(path, horizon)) < len(path):
-                phases.insert(0, ("near", horizon))
+                phases.insert(0, (Phase.NEAR, horizon))
         return phases
 
     def _horizon_m(self, peer: Peer, path: list[tuple[int, int]]) -> int:
@@ -304,10 +306,10 @@ class AliceRuns(Edits):
             m //= 2
         return m
 
-    async def _run(self, peer: Peer, phase: str, horizon: int) -> bool:
+    async def _run(self, peer: Peer, phase: Phase, horizon: int) -> bool:
         """One run; True when it ended with a result (or had nothing to compare)."""
         start, path = self._remaining_path()
-        if phase == "near":
+        if phase is Phase.NEAR:
             skip = self._before_meeting(peer, start, path)
             if skip:  # what is left of the horizon after the segments skipped
                 here = self._here()
@@ -337,14 +339,14 @@ class AliceRuns(Edits):
             # Bob's unproven keys could make what he decrypts depend on our path: only with
             # drones whose operator vouches for them (trust.operator.paper_keys).
             error = f"operator {op.name} is not trusted with paper-suite keys (paper_keys)"
-            self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=error)
+            self.record(EventKind.RUN_FAILED, PeerFailure(peer=peer.node, phase=phase, error=error))
             return False
         try:
             ticket = self.ledger.admit(
                 peer.identity, op.key.fingerprint, op.max_runs_per_hour, self.clock.wall(), ALICE
             )
         except BudgetExceeded as exc:
-            self.record(EventKind.BUDGET, peer=peer.node, error=str(exc))
+            self.record(EventKind.BUDGET, PeerFailure(peer=peer.node, error=str(exc)))
             return False
         done = await self._compare(peer, phase, horizon, start, path, neighbour)
         if not done:
@@ -354,7 +356,7 @@ class AliceRuns(Edits):
     async def _compare(
         self,
         peer: Peer,
-        phase: str,
+        phase: Phase,
         horizon: int,
         start: int,
         path: list[tuple[int, int]],
@@ -369,7 +371,7 @@ class AliceRuns(Edits):
         for attempt in range(2):
             grid = self._grid(path)
             setup = self.holder_setups.get(peer.node)
-            if phase == "near":
+            if phase is Phase.NEAR:
                 horizon = self._bob_horizon(asked, start, path, peer, grid, fresh=setup is None)
             try:
                 route, volumes = self._own_route(grid, start, path)
@@ -384,7 +386,9 @@ class AliceRuns(Edits):
                     trusted_keys=neighbour.operator.paper_keys,
                 )
             except ProtocolError as exc:
-                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=str(exc))
+                self.record(
+                    EventKind.RUN_FAILED, PeerFailure(peer=peer.node, phase=phase, error=str(exc))
+                )
                 return False
             # Bob's size is unknown until his first reply: act at once only if even the
             # smallest Bob makes the result too late; the watch re-checks with his real size.
@@ -392,18 +396,20 @@ class AliceRuns(Edits):
             meet = self._urgency(peer)
             self.record(
                 EventKind.RUN_STARTED,
-                peer=peer.node,
-                phase=phase,
-                segments=alice.m,
-                first_segment=start,
-                estimate_s=round(needed, 1),
-                time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
+                RunStarted(
+                    peer=peer.node,
+                    phase=phase,
+                    segments=alice.m,
+                    first_segment=start,
+                    estimate_s=round(needed, 1),
+                    time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
+                ),
             )
-            if phase == "near":
+            if phase is Phase.NEAR:
                 peer.near_run = (self.clock.now(), horizon)
             if too_late(needed, meet, self.settings.failsafe):
                 await self._precaution(peer, needed, meet)
-            watchdog = asyncio.create_task(self._watch(peer, alice, grid, needed))
+            watchdog = self._spawn(self._watch(peer, alice, grid, needed), "watch")
             self._sessions += 1
             self._own_on_air = alice
 
@@ -436,11 +442,13 @@ class AliceRuns(Edits):
             except PeerRefused as exc:
                 if exc.code is Refusal.UNKNOWN_SETUP and attempt == 0:
                     self.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
-                    self.record(EventKind.SETUP_RENEWED, peer=peer.node)
+                    self.record(EventKind.SETUP_RENEWED, PeerNote(peer=peer.node))
                     continue
                 if exc.code is Refusal.ROLE:
                     peer.role = Role.BOB  # the peer already resolved this pair as Alice
-                    self.record(EventKind.YIELDED, peer=peer.node, reason="the peer is Alice")
+                    self.record(
+                        EventKind.YIELDED, PeerNote(peer=peer.node, reason="the peer is Alice")
+                    )
                     return False
                 if exc.code is Refusal.BUSY:
                     # Its own run is on the air: not a failure, ask again soon (at a random
@@ -448,34 +456,40 @@ class AliceRuns(Edits):
                     low, high = self.settings.busy_retry_s
                     peer.retry_in = low + (high - low) * secrets.randbelow(1001) / 1000
                     peer.busy = True
-                    self.record(EventKind.PEER_BUSY, peer=peer.node, phase=phase)
+                    self.record(EventKind.PEER_BUSY, PeerNote(peer=peer.node, phase=phase))
                     return False
                 if exc.code is Refusal.UNKNOWN_PEER:
                     self._cert_now.set()  # it lacks our certificate: beacon it
-                box = (  # off our beacons, or beyond the peer's limits: which box we asked
-                    {"box_radius_m": grid.radius_m, "resolution_mm": grid.resolution_mm}
-                    if exc.code is Refusal.BOX
-                    else {}
-                )
+                box = exc.code is Refusal.BOX  # off our beacons, or beyond its limits
                 self.record(
                     EventKind.RUN_FAILED,
-                    peer=peer.node,
-                    phase=phase,
-                    refused=exc.code.name,
-                    **box,
+                    PeerFailure(
+                        peer=peer.node,
+                        phase=phase,
+                        refused=exc.code.name,
+                        box_radius_m=grid.radius_m if box else None,  # the box we asked for
+                        resolution_mm=grid.resolution_mm if box else None,
+                    ),
                 )
                 return False
             except AuthenticationError as exc:
-                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, auth=str(exc))
+                self.record(
+                    EventKind.RUN_FAILED, PeerFailure(peer=peer.node, phase=phase, auth=str(exc))
+                )
                 return False
             except ConsistencyError as exc:
                 # The peer's OT extension is not the honest one: it probed our Delta.  Drop
                 # the setup (a wrong guess must not be followed by another on the same Delta).
                 self.holder_setups.pop(peer.node, None)
-                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, deviated=str(exc))
+                self.record(
+                    EventKind.RUN_FAILED,
+                    PeerFailure(peer=peer.node, phase=phase, deviated=str(exc)),
+                )
                 return False
             except (ProtocolError, CompanionError) as exc:
-                self.record(EventKind.RUN_FAILED, peer=peer.node, phase=phase, error=str(exc))
+                self.record(
+                    EventKind.RUN_FAILED, PeerFailure(peer=peer.node, phase=phase, error=str(exc))
+                )
                 return False
             finally:
                 self._sessions -= 1
@@ -493,21 +507,23 @@ class AliceRuns(Edits):
         covered = set(range(start, start + len(path) - 1))
         peer.conflicts = (peer.conflicts - covered) | flagged
         peer.covered |= covered
-        if phase == "full":
+        if phase is Phase.FULL:
             peer.settled |= covered
         self.record(
             EventKind.RESULT,
-            peer=peer.node,
-            phase=phase,
-            hits=report.hits,
-            first_segment=start,
-            flagged=sorted(flagged),
-            bytes=report.bytes_sent,
-            auth_bytes=report.auth_bytes_sent,
-            cpu_s=round(report.cpu_s, 3),
-            run_s=round(report.wall_s, 1),
+            RunResult(
+                peer=peer.node,
+                phase=phase,
+                hits=report.hits,
+                first_segment=start,
+                flagged=sorted(flagged),
+                bytes=report.bytes_sent,
+                auth_bytes=report.auth_bytes_sent,
+                cpu_s=round(report.cpu_s, 3),
+                run_s=round(report.wall_s, 1),
+            ),
         )
-        if phase == "full" or covered >= self.precaution.get(peer.node, set()):
+        if phase is Phase.FULL or covered >= self.precaution.get(peer.node, set()):
             await self._release(peer)
         await self._replan(f"result of the {phase} run with {peer.node}")
         return True

@@ -16,7 +16,7 @@ import math
 from companion.app.core import CompanionCore
 from companion.auth.session import AuthenticationError, Init, Refusal, Responder, Route
 from companion.errors import CompanionError
-from companion.events import EventKind
+from companion.events import Answered, EventKind, PeerFailure, PeerNote
 from companion.mission.items import point_as_segment
 from companion.mission.schedule import T_RANGE_S, route_volumes, run_volumes
 from companion.neighbours.beacon import MAX_SIZE_CLASS
@@ -118,14 +118,14 @@ class BobAnswers(CompanionCore):
                     if not responder.keyed:  # no first reply: Alice learnt nothing
                         self.ledger.refund(ticket)
         except AuthenticationError as exc:
-            self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, auth=str(exc)))
             return
         except (ProtocolError, CompanionError) as exc:
-            self.record(EventKind.ANSWER_FAILED, peer=peer, error=str(exc))
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=str(exc)))
             return
         except Exception as exc:  # nothing may stop the companion
             log.exception("node %d: answering %d failed", self.settings.node, peer)
-            self.record(EventKind.ANSWER_FAILED, peer=peer, error=f"internal: {exc!r}")
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=f"internal: {exc!r}"))
             return
         finally:
             if waiting:
@@ -135,14 +135,16 @@ class BobAnswers(CompanionCore):
             while len(setups) > SETUPS_PER_PEER:  # the oldest go first
                 setups.pop(next(iter(setups)))
         if report.refused is not None:
-            self.record(EventKind.REFUSED, peer=peer, reason=report.refused.name)
+            self.record(EventKind.REFUSED, PeerNote(peer=peer, reason=report.refused.name))
             return
         self.record(
             EventKind.ANSWERED,
-            peer=peer,
-            bytes=report.bytes_sent,
-            auth_bytes=report.auth_bytes_sent,
-            guard_bytes=bob.guard_bytes,
+            Answered(
+                peer=peer,
+                bytes=report.bytes_sent,
+                auth_bytes=report.auth_bytes_sent,
+                guard_bytes=bob.guard_bytes,
+            ),
         )
 
     async def _admit(
@@ -156,7 +158,7 @@ class BobAnswers(CompanionCore):
             init = Init.parse(request)
         except AuthenticationError as exc:
             self.endpoint.abort(peer, session, AbortCode.AUTH)
-            self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, auth=str(exc)))
             return None
         responder = Responder(self.identity, init, Route(peer, self.settings.node, session))
         neighbour = self.neighbours.get(peer)
@@ -189,14 +191,14 @@ class BobAnswers(CompanionCore):
             # of an honest drone learns at once; a forger's learns nothing new).
             proof = responder.abort_proof(AbortCode.AUTH)
             self.endpoint.abort(peer, session, AbortCode.AUTH, proof)
-            self.record(EventKind.ANSWER_FAILED, peer=peer, auth=str(exc))
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, auth=str(exc)))
             return None
         try:
             hello = Hello.from_bytes(init.hello)
         except ProtocolError as exc:
             proof = responder.abort_proof(AbortCode.PROTOCOL)
             self.endpoint.abort(peer, session, AbortCode.PROTOCOL, proof)
-            self.record(EventKind.ANSWER_FAILED, peer=peer, error=str(exc))
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=str(exc)))
             return None
         if known.role is Role.ALICE:
             if self.settings.node < peer:
@@ -204,7 +206,9 @@ class BobAnswers(CompanionCore):
                 # exactly one of a pair adjusts -- the lower node id keeps the role.
                 await self._refuse(peer, session, responder, Refusal.ROLE)
                 return None
-            self.record(EventKind.YIELDED, peer=peer, reason="the peer has the lower node id")
+            self.record(
+                EventKind.YIELDED, PeerNote(peer=peer, reason="the peer has the lower node id")
+            )
         own = self._own_on_air
         if (own is not None and own.n is None) or self._answers_waiting:
             # Our own run holds the radio and still waits for its peer's first reply (a
@@ -238,7 +242,7 @@ class BobAnswers(CompanionCore):
                 operator_bits=operator.max_answer_bits_per_hour,
             )
         except BudgetExceeded as exc:
-            self.record(EventKind.BUDGET, peer=peer, error=str(exc))
+            self.record(EventKind.BUDGET, PeerFailure(peer=peer, error=str(exc)))
             await self._refuse(peer, session, responder, Refusal.BUDGET)
             return None
         known.role = Role.BOB
@@ -270,7 +274,7 @@ class BobAnswers(CompanionCore):
         return distance_m(centre, known.anchor[1]) <= known.reach_m(self.clock.now())
 
     async def _refuse(self, peer: int, session: int, responder: Responder, code: Refusal) -> None:
-        self.record(EventKind.REFUSED, peer=peer, reason=code.name)
+        self.record(EventKind.REFUSED, PeerNote(peer=peer, reason=code.name))
         try:
             await self.endpoint.send(peer, session, responder.refuse(code))
         except LinkError:

@@ -18,11 +18,11 @@ from __future__ import annotations
 import math
 
 from companion.app.runtime import Companion
-from companion.events import RUN_ENDS
+from companion.events import RUN_ENDS, Answered, Precaution, RunResult, Stranger, Uploaded
 from companion.events import EventKind as K
 from companion.mission.items import MissionItem, point_as_segment
 from companion.mission.personalities import personality
-from companion.neighbours.beacon import UNAUTHENTICATED_SIZE
+from companion.neighbours.beacon import UNAUTHENTICATED_SIZE, BeaconKind
 from companion.sim.report import (
     AuthCost,
     DroneReport,
@@ -119,26 +119,15 @@ def _acted(c: Companion, peer: int, until: float, *, clear_of: bool = True) -> b
     a verified edit whose raises were chosen clear of its altitudes (a raise for a third
     drone that keeps out of a peer the runs found clear of the unraised path; not with
     ``clear_of`` False: keeping clear of a peer is no alarm about it)?"""
-    if any(
-        e.kind is K.PRECAUTIONARY and e.detail.get("peer") == peer and e.t <= until
-        for e in c.events
-    ):
+    before = [e.payload for e in c.events if e.t <= until]
+    if any(isinstance(p, Precaution) and p.peer == peer for p in before):
         return True
-    flagged = {
-        k
-        for e in c.events
-        if e.kind is K.RESULT and e.detail.get("peer") == peer and e.t <= until
-        for k in e.detail.get("flagged", [])
-    }
+    flagged = {k for p in before if isinstance(p, RunResult) and p.peer == peer for k in p.flagged}
     return any(
-        e.kind is K.UPLOADED
-        and e.t <= until
-        and e.detail.get("verified")
-        and (
-            flagged & {int(k) for k in e.detail.get("raises", {})}
-            or (clear_of and peer in e.detail.get("clear_of", []))
-        )
-        for e in c.events
+        isinstance(p, Uploaded)
+        and p.verified
+        and (flagged & {int(k) for k in p.raises} or (clear_of and peer in p.clear_of))
+        for p in before
     )
 
 
@@ -180,9 +169,9 @@ def build_report(
         precautions += len(precautionary)
         stats = c.endpoint.stats
         run_auth = sum(
-            e.detail.get("auth_bytes", 0) for e in c.events if e.kind in (K.RESULT, K.ANSWERED)
+            e.payload.auth_bytes for e in c.events if isinstance(e.payload, RunResult | Answered)
         )
-        position_beacons = c.beacons_sent["signed"] + c.beacons_sent["tagged"]
+        position_beacons = c.beacons_sent[BeaconKind.SIGNED] + c.beacons_sent[BeaconKind.TAGGED]
         drones.append(
             DroneReport(
                 id=d.id,
@@ -211,13 +200,17 @@ def build_report(
                 auth=AuthCost(
                     run_bytes=run_auth,
                     beacon_bytes=c.beacon_bytes,
-                    beacons=dict(c.beacons_sent),
+                    beacons={str(k): v for k, v in c.beacons_sent.items()},
                     beacon_added_bytes=c.beacon_bytes - UNAUTHENTICATED_SIZE * position_beacons,
                 ),
                 guard_bytes=sum(
-                    e.detail.get("guard_bytes", 0) for e in c.events if e.kind is K.ANSWERED
+                    e.payload.guard_bytes for e in c.events if isinstance(e.payload, Answered)
                 ),
-                untrusted_heard=[e.detail["drone"] for e in c.events if e.kind is K.UNTRUSTED],
+                untrusted_heard=[
+                    e.payload.drone
+                    for e in c.events
+                    if e.kind is K.UNTRUSTED and isinstance(e.payload, Stranger)
+                ],
                 beacons_rejected=dict(c.rejected),
                 max_altitude_m_amsl=round(
                     max((alt for *_, alt in mocks[d.id].trajectory), default=0.0), 2

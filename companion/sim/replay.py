@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from companion.app.runtime import Companion, CompanionSettings
-from companion.events import Event, EventKind
+from companion.events import Event, EventKind, Retimed, RunResult, RunStarted, Uploaded
 from companion.mission.autopilot import Autopilot, AutopilotBase
 from companion.mission.personalities import personality
 from companion.mission.planner import OffsetSettings
@@ -88,28 +88,28 @@ TOLD = frozenset(
 
 def _story(event: Event) -> str:
     """One companion event as a progress line of the replay."""
-    d = event.detail
-    if event.kind is EventKind.RUN_STARTED:
+    p = event.payload
+    if isinstance(p, RunStarted):
         return (
-            f"{d['phase']} run with {d['peer']} started ({d['segments']} segments, about "
-            f"{d['estimate_s']:.0f} s)"
+            f"{p.phase} run with {p.peer} started ({p.segments} segments, about "
+            f"{p.estimate_s:.0f} s)"
         )
-    if event.kind is EventKind.RESULT:
-        flagged = ", ".join(map(str, d["flagged"])) or "none"
+    if isinstance(p, RunResult):
+        flagged = ", ".join(map(str, p.flagged)) or "none"
         return (
-            f"result of the {d['phase']} run with {d['peer']}: segments {flagged} conflict "
-            f"({d['bytes']} B sent, {d['run_s']:.0f} s)"
+            f"result of the {p.phase} run with {p.peer}: segments {flagged} conflict "
+            f"({p.bytes} B sent, {p.run_s:.0f} s)"
         )
-    if event.kind is EventKind.UPLOADED:
+    if isinstance(p, Uploaded):
         return "edit uploaded and verified"
-    if event.kind is EventKind.RETIMED:
-        if d["held"]:
+    if isinstance(p, Retimed):
+        if p.held:
             return "holding: its windows are open from now on, every peer compares again"
-        if d.get("on_ground"):
+        if p.on_ground:
             return "still on the ground after half its wait: every peer compares again"
-        way = "behind" if d["drift_s"] > 0 else "ahead of"
-        return f"{abs(d['drift_s']):.0f} s {way} its windows: every peer compares again"
-    details = ", ".join(f"{k}={v}" for k, v in d.items())
+        way = "behind" if p.drift_s > 0 else "ahead of"
+        return f"{abs(p.drift_s):.0f} s {way} its windows: every peer compares again"
+    details = ", ".join(f"{k}={v}" for k, v in event.detail.items())
     return f"{event.kind.replace('_', ' ')} ({details})"
 
 

@@ -1,2 +1,1 @@
-"""Boolean circuits (:mod:`.boolean`) and the one both suites evaluate (:mod:`.paths`).
-"""
+"""Boolean circuits (:mod:`.boolean`) and the one both suites evaluate (:mod:`.paths`)."""

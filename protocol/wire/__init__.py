@@ -1,2 +1,1 @@
-"""Fixed-width encodings: the strict reader of received bytes, integers and bit packing.
-"""
+"""Fixed-width encodings: the strict reader of received bytes, integers and bit packing."""

@@ -4,7 +4,6 @@ MAVLink), and an attacker who hears every frame and can put any frame on the air
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -230,7 +229,7 @@ async def world(
     for c in drones.values():
         await c.endpoint.start()
         for work in (c._certificates, c._beacons, c._listen, c._serve, c._alice_loop):
-            c._tasks.append(asyncio.create_task(work()))
+            c._spawn(work(), work.__name__)
     return w
 
 

@@ -163,7 +163,7 @@ async def restart(w: World, node: int) -> Any:
     w.taps[node] = Tap(w.medium.attach(node), w.sniffer, w.clock)
     endpoint = old.endpoint.__class__(node, w.taps[node], old.endpoint.profile, clock=w.clock)
     c = Companion(
-        CompanionSettings(node=node, autopilot_url=""),
+        CompanionSettings(node=node, autopilot_url="", run_timeout_s=None),
         endpoint,
         w.autopilots[node],  # type: ignore[arg-type]
         w.credentials[node],
@@ -172,7 +172,7 @@ async def restart(w: World, node: int) -> Any:
     c.home, c.path, c.position, c.epoch = old.home, old.path, old.position, w.clock.now()
     await c.endpoint.start()
     for work in (c._certificates, c._beacons, c._listen, c._serve, c._alice_loop):
-        c._tasks.append(asyncio.create_task(work()))
+        c._spawn(work(), work.__name__)
     w.drones[node] = c
     return c
 
