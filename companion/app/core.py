@@ -16,7 +16,6 @@ import functools
 import logging
 import math
 import secrets
-import time
 from collections.abc import Coroutine, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,10 +41,11 @@ from companion.mission.schedule import (
     predict,
     run_volumes,
 )
-from companion.neighbours.beacon import BeaconKind, alice_of, keys_hash
-from companion.neighbours.beacon_airtime import beacon_interval
-from companion.neighbours.peers import FRESH_S, Peer, distance_m, near_cut, time_to_meet
+from companion.mission.vehicle import VehicleState
+from companion.neighbours.beacon import alice_of, keys_hash
+from companion.neighbours.peers import Peer, distance_m, near_cut, time_to_meet
 from companion.neighbours.registry import Neighbours
+from companion.neighbours.sender import BeaconSender, Cadence
 from companion.radio.endpoint import LinkEndpoint
 from companion.runs.budget import RunLedger, RunLimits
 from companion.runs.failsafe import FailsafeSettings, run_seconds
@@ -67,9 +67,6 @@ TIMING_LOOK_S = 180.0  # how far ahead the timing watch predicts (the full sched
 TIMING_EVERY_S = 5.0  # and how often
 PREDICTIONS_KEPT = 8  # schedules remembered for a vehicle state (several paths and limits)
 NEAR_SEGMENTS = 2  # each side of a near run compares at least its next two segments
-SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one),
-SIGNED_EVERY = 30  # and at most every 30th beacon (a duty cycle stretches beacons to minutes)
-ASKED_AGAIN = 0.5  # asked for, a certificate or signed beacon at most every half interval
 ASK_BACKOFF_S = 30.0  # asking a drone again for what its beacons lack: at most this far apart
 # (or four beacon intervals where a duty cycle stretches them) -- at 30 % loss one exchange
 # of certificates fails about one time in two, and a backoff to 5 minutes left a drone
@@ -191,21 +188,26 @@ class CompanionCore:
                 settings.max_answer_bits_per_peer,
             ),
         )
-        self._order: int | None = None  # (time, counter) of our last beacon
-        self._cert_sent = -math.inf
+        self.cadence = Cadence.of(endpoint, settings.beacon_interval_s)
+        self.sender = BeaconSender(
+            settings.node,
+            endpoint,
+            self.identity,
+            self.beacon_keys,
+            self.keys_hash,
+            self.store,
+            self.neighbours,
+            self.cadence,
+        )
         self._unknown_refused = -math.inf
-        self._signed_at = -math.inf  # our last signed beacon
-        self._sign_next = True  # the next beacon is a signed one
-        self._cert_wanted = False
         self._ignored: set[bytes] = set()  # untrusted drones logged already
         self._alerted: dict[int, float] = {}
         self._asking: dict[int, tuple[float, float]] = {}  # node -> (next ask, interval)
         self.rejected: dict[str, int] = {}  # beacons dropped, by reason
-        self.beacon_bytes = 0  # beacon payloads we sent (position and certificate)
-        self.beacons_sent = dict.fromkeys(BeaconKind, 0)
         self.holder_setups: dict[int, HolderSetup] = {}  # peer -> ours as Alice
         self.chooser_setups: dict[int, dict[bytes, ChooserSetup]] = {}  # peer -> ours as Bob
         self.peers: dict[int, Peer] = {}
+        self.vehicle = VehicleState()  # what the autopilot's telemetry says
         self.events: list[Event] = []
         self.original: list[MissionItem] = []
         self.mission: list[MissionItem] = []
@@ -226,24 +228,11 @@ class CompanionCore:
         self._ground_retimes = 0  # ... and how often they were moved on there (each doubles)
         self.flagged: set[int] = set()  # segments the comparisons found in conflict
         self.precaution: dict[int, set[int]] = {}  # peer -> segments climbed as a precaution
-        self.position: tuple[int, int, float] = (0, 0, 0.0)  # lat, lon degE7, alt AMSL
-        self.position_at = 0.0  # when it came (link seconds): the state a prediction starts at
-        self.relative_alt = 0.0
-        self.armed = False
-        self.speed_m_s = 0.0
-        self.climb_m_s = 0.0  # vertical speed, up
-        self.held = False  # holding in the air (paused, or the mission over): flies on when?
-        self.current_item = 0
-        self.has_flown = False  # airborne at least once since the companion started
-        self._heard_autopilot = time.monotonic()  # the last position (real seconds)
         self._children: set[asyncio.Task[None]] = set()
         self._busy = asyncio.Lock()
         self._radio = RadioTurns()  # one run on the air at a time, as Alice or Bob
         self._edit_lock = asyncio.Lock()
         self._wake = asyncio.Event()
-        self._beacon_now = asyncio.Event()
-        self._cert_now = asyncio.Event()
-        self._cert_now.set()  # our certificate, then a signed beacon: peers can check us at once
         self._sessions = 0  # runs on the air (as Alice or Bob)
         self._answering = 0  # runs we answer as Bob
         self._holding: set[int] = set()  # peers we hold for
@@ -307,38 +296,12 @@ class CompanionCore:
         key), met less than a signed-beacon period ago: the run waits for the introduction,
         and so does a take-off held for comparisons -- not for ever (a drone that does not
         trust us never will)."""
-        return not self._knows_us(peer) and now - peer.met_at < self._signed_every_s
-
-    @property
-    def on_ground(self) -> bool:
-        """On the ground and not leaving it: an armed vehicle below 1 m is taking off (a
-        departure is flight: its runs are in-flight runs)."""
-        return self.relative_alt < 1.0 and not self.armed
+        return not self._knows_us(peer) and now - peer.met_at < self.cadence.signed_every_s
 
     @property
     def version(self) -> int:
         """What our beacons announce: the mission the vehicle holds, in four dimensions."""
         return mission_version(self.flown, self.mission, self.retimed)
-
-    @property
-    def beacon_interval(self) -> float:
-        """The configured interval, stretched on duty-cycled links so beacons use at most
-        5 % of the budget (EU868 SF9: one beacon per ~5 minutes)."""
-        return beacon_interval(self.endpoint.profile, self.settings.beacon_interval_s)
-
-    @property
-    def _signed_every_s(self) -> float:
-        """A signed beacon at least this often: 5 minutes, or every 30th beacon where a duty
-        cycle stretches the interval to minutes."""
-        return max(SIGNED_EVERY_S, SIGNED_EVERY * self.beacon_interval)
-
-    @property
-    def _asked_every_s(self) -> float:
-        """How often we answer requests for our certificate or signed beacon (and refuse
-        runs of drones we do not know yet): every half *configured* beacon interval, at least
-        2 s -- not the interval a duty cycle stretches to minutes: discovery must not wait
-        for that (the duty-cycle budget itself spaces the frames)."""
-        return max(2.0, ASKED_AGAIN * self.settings.beacon_interval_s)
 
     def _should_compare(self, peer: Peer, now: float) -> bool:
         """Pending, not waiting for a retry, and the peer can check our requests: its tagged
@@ -347,7 +310,7 @@ class CompanionCore:
 
     def _pending(self, peer: Peer) -> bool:
         """We are Alice for this peer, it is in range, and its paths are not compared yet."""
-        me = (self.on_ground, self.settings.node)
+        me = (self.vehicle.on_ground, self.settings.node)
         them = (peer.beacon.on_ground, peer.node)
         if peer.role is Role.BOB:
             return False
@@ -355,9 +318,9 @@ class CompanionCore:
             return False
         if self.settings.suite not in peer.beacon.suites:
             return False
-        if self.position[:2] == (0, 0):
+        if self.vehicle.position[:2] == (0, 0):
             return False
-        if distance_m(self.position[:2], peer.position) > self.settings.initiation_range_m:
+        if distance_m(self.vehicle.position[:2], peer.position) > self.settings.initiation_range_m:
             return False
         return peer.compared != (peer.beacon.mission_version, self.compare_version)
 
@@ -370,32 +333,26 @@ class CompanionCore:
             floor = max(floor, self.settings.cruise_m_s)
         return max(peer.speed_m_s, floor)
 
-    @property
-    def _silence_s(self) -> float:
-        """How long a peer may go unheard in the normal course: beacons are deferred up to
-        three intervals while runs are on the air (and jittered), measurements age FRESH_S."""
-        return 4.0 * self.beacon_interval + FRESH_S
-
     def _silent_for(self, peer: Peer) -> float:
         """Seconds since the peer was last heard if it has fallen silent, else 0."""
         age = self.clock.now() - peer.heard_at
-        return age if age > self._silence_s else 0.0
+        return age if age > self.cadence.silence_s else 0.0
 
     def _still_heard(self, node: int) -> bool:
-        """The peer has not fallen silent (:meth:`_silence_s`): a run's message the link
+        """The peer has not fallen silent (:attr:`Cadence.silence_s`): a run's message the link
         gave up on goes again while it is heard -- a jammer, not a drone gone."""
         peer = self.peers.get(node)
         return peer is not None and not self._silent_for(peer)
 
     def _urgency(self, peer: Peer) -> float:
         return time_to_meet(
-            self.position[:2],
-            self.speed_m_s,
+            self.vehicle.position[:2],
+            self.vehicle.speed_m_s,
             peer,
             floor_m_s=self.settings.failsafe.floor_m_s,
             peer_floor_m_s=self._peer_speed(peer),
             now=self.clock.now(),
-            silent_after_s=self._silence_s,
+            silent_after_s=self.cadence.silence_s,
         )
 
     def _remaining_path(self) -> tuple[int, list[tuple[int, int]]]:
@@ -405,19 +362,19 @@ class CompanionCore:
 
     def _remaining_flown(self) -> tuple[int, list[tuple[int, int]]]:
         """The path still to fly, of the mission the vehicle holds (what Bob answers with)."""
-        return self._remaining(self.flown, self.current_item)
+        return self._remaining(self.flown, self.vehicle.current_item)
 
     def _remaining(self, path: FlightPath, current: int) -> tuple[int, list[tuple[int, int]]]:
         """All of ``path`` before the first take-off; in flight from the leg to the current
         item; landed after flying, from there on -- and nothing (the landing point) once the
         current item is the last one on the path, so a drone whose mission is over never
         compares, as Alice, a path it will not fly again."""
-        if self.on_ground and not self.has_flown:
+        if self.vehicle.on_ground and not self.vehicle.has_flown:
             return 0, path.points
         start = path.start_at(current)
         points = path.points[start:]
         last = max((i for v in path.vertices for i in v.items), default=0)
-        if self.on_ground and current >= last:
+        if self.vehicle.on_ground and current >= last:
             return len(path.points) - 1, points[-1:]
         return start, points
 
@@ -425,9 +382,9 @@ class CompanionCore:
     def original_current(self) -> int:
         """The vehicle's current item as an item of the original mission."""
         if self.edit is None:
-            return self.current_item
+            return self.vehicle.current_item
         origin = self.edit.origin
-        return origin[min(max(self.current_item, 0), len(origin) - 1)] if origin else 0
+        return origin[min(max(self.vehicle.current_item, 0), len(origin) - 1)] if origin else 0
 
     @property
     def flown(self) -> FlightPath:
@@ -455,8 +412,8 @@ class CompanionCore:
         if self.settings.ardupilot and self.mission:
             first = self.mission[0]
             return first.x / 1e7, first.y / 1e7, first.z
-        lat, lon, alt = self.position
-        return lat / 1e7, lon / 1e7, alt - self.relative_alt
+        lat, lon, alt = self.vehicle.position
+        return lat / 1e7, lon / 1e7, alt - self.vehicle.relative_alt
 
     def _schedule(
         self,
@@ -469,22 +426,22 @@ class CompanionCore:
         """``path`` (the flown path of ``items``) in four dimensions from vertex ``start``,
         as the flight model flies ``items`` on from where the vehicle is now."""
         home = self._home_deg()
-        lat, lon = self.position[0] / 1e7, self.position[1] / 1e7
-        if self.position[:2] == (0, 0):
+        lat, lon = self.vehicle.position[0] / 1e7, self.vehicle.position[1] / 1e7
+        if self.vehicle.position[:2] == (0, 0):
             lat, lon = home[0], home[1]
         loitering = 0.0
-        if self._over_item is not None and self._over_item[0] == self.current_item:
-            loitering = self.position_at - self._over_item[1]
+        if self._over_item is not None and self._over_item[0] == self.vehicle.current_item:
+            loitering = self.vehicle.position_at - self._over_item[1]
         vehicle = Vehicle(
             lat,
             lon,
-            self.relative_alt,
-            self.speed_m_s,
+            self.vehicle.relative_alt,
+            self.vehicle.speed_m_s,
             current,
-            self.on_ground,
+            self.vehicle.on_ground,
             loitering,
-            self.climb_m_s,
-            self.held and not self.on_ground,
+            self.vehicle.climb_m_s,
+            self.vehicle.held and not self.vehicle.on_ground,
             self._ground_wait_left(),
         )
         # The same prediction is asked for again and again between two telemetry samples
@@ -518,7 +475,7 @@ class CompanionCore:
         within the windows its peers hold (infinite: not on the ground -- or more than half
         the wait is over and :meth:`_keep_time` has not moved it on yet: then when it takes
         off is not known)."""
-        if not self.on_ground or self.has_flown:
+        if not self.vehicle.on_ground or self.vehicle.has_flown:
             return math.inf
         now = self.clock.now()
         if self._ground_since is None:
@@ -528,24 +485,26 @@ class CompanionCore:
 
     def _wall_of_state(self) -> float:
         """The wall time of the vehicle state predictions start from (its last position)."""
-        if self.position_at == 0.0:
+        if self.vehicle.position_at == 0.0:
             return self.clock.wall()
-        return self.clock.wall() - (self.clock.now() - self.position_at)
+        return self.clock.wall() - (self.clock.now() - self.vehicle.position_at)
 
     def _note_position(self) -> None:
         """Since when the vehicle has been over its current item's point (a loiter's or a
         waypoint's hold time under way, which the schedule counts down from there)."""
-        i = self.current_item
-        item = self.mission[i] if not self.on_ground and 0 <= i < len(self.mission) else None
+        i = self.vehicle.current_item
+        item = (
+            self.mission[i] if not self.vehicle.on_ground and 0 <= i < len(self.mission) else None
+        )
         if (
             item is None
             or item.command not in (NAV_LOITER_TIME, NAV_WAYPOINT)
             or not item.has_position
-            or distance_m(self.position[:2], (item.x, item.y)) > OVER_ITEM_M
+            or distance_m(self.vehicle.position[:2], (item.x, item.y)) > OVER_ITEM_M
         ):
             self._over_item = None
         elif self._over_item is None or self._over_item[0] != i:
-            self._over_item = (i, self.position_at)
+            self._over_item = (i, self.vehicle.position_at)
 
     def _keep_time(self) -> None:
         """Compare again when the vehicle has left the windows it announced: against the
@@ -558,7 +517,7 @@ class CompanionCore:
         windows: nothing to keep."""
         if self._edit_lock.locked():  # the mission and its current item are changing
             return
-        if not self.on_ground or self.has_flown:  # (landed: its mission is over)
+        if not self.vehicle.on_ground or self.vehicle.has_flown:  # (landed: its mission is over)
             self._ground_since, self._ground_retimes = None, 0
         elif self.settings.suite is Suite.COMPACT:
             now = self.clock.now()
@@ -568,33 +527,41 @@ class CompanionCore:
                 self._ground_since = now
                 self._ground_retimes += 1
                 self._retime(0.0, ground=True)
-        if self.held and not self.on_ground and self.settings.suite is Suite.COMPACT:
+        if (
+            self.vehicle.held
+            and not self.vehicle.on_ground
+            and self.settings.suite is Suite.COMPACT
+        ):
             # Holding: when it flies on is unknown, its windows are open to the end from now
             # on (as on the ground).  Once, when the hold begins, its peers compare again.
             if self._timing is not None:
                 self._timing = None
                 self._retime(0.0)
             return
-        if self.on_ground or self.relative_alt < 1.0 or self.settings.suite is not Suite.COMPACT:
+        if (
+            self.vehicle.on_ground
+            or self.vehicle.relative_alt < 1.0
+            or self.settings.suite is not Suite.COMPACT
+        ):
             self._timing = None  # (armed on the ground: the spool-up's length is unknown)
             return
         start, points = self._remaining_flown()
         if len(points) < 2:
             return
         key = mission_version(self.flown, self.mission)
-        now = self.position_at  # the predictions start from the vehicle's state then
+        now = self.vehicle.position_at  # the predictions start from the vehicle's state then
         if self._timing is None or self._timing[0] != key:
-            full = self._schedule(self.mission, self.flown, start, self.current_item)
+            full = self._schedule(self.mission, self.flown, start, self.vehicle.current_item)
             self._timing = (key, now, full)
             return
         _, then, before = self._timing
         soon = self._schedule(
-            self.mission, self.flown, start, self.current_item, limit_s=TIMING_LOOK_S
+            self.mission, self.flown, start, self.vehicle.current_item, limit_s=TIMING_LOOK_S
         )
         drift = off_schedule(before, then, soon, now, self.settings.separation.tolerance)
         if drift is None:
             return
-        full = self._schedule(self.mission, self.flown, start, self.current_item)
+        full = self._schedule(self.mission, self.flown, start, self.vehicle.current_item)
         self._timing = (key, now, full)
         self._retime(drift)
 
@@ -612,7 +579,7 @@ class CompanionCore:
                 on_ground=ground,
             ),
         )
-        self._beacon_now.set()
+        self.sender.announce()
 
     def _peer_pace(self, peer: Peer) -> float:
         """How fast the peer may fly through the path it showed: its speed, at least cruise."""
@@ -639,7 +606,7 @@ class CompanionCore:
         if not near or peer.near_run is None:
             return decided
         beyond = self._near_expires(peer) - self.clock.now() - self.settings.failsafe.margin_s
-        if self.on_ground and not self.has_flown:
+        if self.vehicle.on_ground and not self.vehicle.has_flown:
             return decided  # (take-off time unknown: windows never close)
         start = self._remaining_path()[0]
         decided |= {k for k in near if k < start}  # flown already
@@ -674,11 +641,16 @@ class CompanionCore:
         the metre: a slot is 5 m), not with each position report: remembered for those."""
         start, points = self._remaining_flown()
         if len(points) < 2:
-            return Slots.of([(self.position[2], self.position[2])])
-        key = (self.version, self.current_item, self.on_ground, round(self.relative_alt))
+            return Slots.of([(self.vehicle.position[2], self.vehicle.position[2])])
+        key = (
+            self.version,
+            self.vehicle.current_item,
+            self.vehicle.on_ground,
+            round(self.vehicle.relative_alt),
+        )
         if self._slots_of is not None and self._slots_of[0] == key:
             return self._slots_of[1]
-        schedule = self._schedule(self.mission, self.flown, start, self.current_item)
+        schedule = self._schedule(self.mission, self.flown, start, self.vehicle.current_item)
         tolerance = self.settings.separation.tolerance
         slots = Slots.of(
             schedule.cruise(k, tolerance) for k in range(start, start + len(points) - 1)
@@ -687,17 +659,13 @@ class CompanionCore:
         return slots
 
     def _grid(self, path: list[tuple[int, int]]) -> GridSpec:
-        lat, lon = self.position[:2]
+        lat, lon = self.vehicle.position[:2]
         radius = box_radius_m(
             path, (lat, lon), self.settings.grid_radius_m, self.settings.separation.horizontal_m
         )
         return GridSpec.geo(
             lat, lon, resolution_mm=self.settings.grid_resolution_mm, radius_m=radius
         )
-
-    def _here(self) -> tuple[int, int] | None:
-        """Where the drone is, for distances along its path (None on the ground)."""
-        return None if self.on_ground or self.position[:2] == (0, 0) else self.position[:2]
 
     def _seconds(
         self,
@@ -734,7 +702,7 @@ class CompanionCore:
     def _near(self, path: list[tuple[int, int]], horizon: int) -> list[tuple[int, int]]:
         """The part of the remaining path a run with this horizon compares (a full run's
         horizon is 0: all of it)."""
-        return near_cut(path, horizon, self._here(), least=NEAR_SEGMENTS)
+        return near_cut(path, horizon, self.vehicle.here(), least=NEAR_SEGMENTS)
 
     def _forget(self, node: int) -> None:
         self.peers.pop(node, None)

@@ -37,7 +37,6 @@ from companion.events import EventKind, MissionRead, Problem
 from companion.mission.flightpath import flight_path
 from companion.mission.items import MissionError
 from companion.neighbours.beaconing import Beaconing
-from companion.neighbours.peers import distance_m
 from companion.runs.alice import AliceRuns
 from companion.runs.bob import BobAnswers
 
@@ -78,15 +77,20 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
             ("armed", self._armed),
             ("flight mode", self._flight_mode),
             ("autopilot watch", self._autopilot_watch),
-            ("certificates", self._certificates),
-            ("beacons", self._beacons),
-            ("listen", self._listen),
-            ("serve", self._serve),
-            ("alice", self._alice_loop),
             ("guard", self._guard),
             ("timing", self._timing_watch),
         ):
             self._spawn(work(), name)
+        self.start_radio()
+
+    def start_radio(self) -> None:
+        """The parts on the radio: our beacons out (certificates, positions), theirs in,
+        answers as Bob, our runs as Alice (the endpoint started)."""
+        self._spawn(self.sender.certificates(), "certificates")
+        self._spawn(self.sender.positions(self._own_beacon, self._on_air), "beacons")
+        self._spawn(self._listen(), "listen")
+        self._spawn(self._serve(), "serve")
+        self._spawn(self._alice_loop(), "alice")
 
     async def stop(self) -> None:
         """Cancel every task and close the radio and the store.  A mission edit under way is
@@ -113,37 +117,22 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
         self.store.close()
 
     async def _telemetry(self) -> None:
-        last: tuple[float, tuple[int, int], float] | None = None
         async for p in self.autopilot.positions(POSITION_RATE_HZ):
-            self._heard_autopilot = time.monotonic()
-            self.position = (round(p.lat_deg * 1e7), round(p.lon_deg * 1e7), p.amsl_m)
-            self.position_at = self.clock.now()
-            was_on_ground = self.on_ground
-            self.relative_alt = p.relative_m
-            self._note_position()
-            if was_on_ground and not self.on_ground:
-                self.has_flown = True
-                self._beacon_now.set()  # taking off: announce it
             now = self.clock.now()
-            if last is None or now - last[0] >= 1.0:
-                if last is not None:
-                    moved = distance_m(last[1], self.position[:2]) / (now - last[0])
-                    self.speed_m_s = 0.5 * (self.speed_m_s + moved)
-                    self.climb_m_s = (self.relative_alt - last[2]) / (now - last[0])
-                last = (now, self.position[:2], self.relative_alt)
+            if self.vehicle.moved(p.lat_deg, p.lon_deg, p.amsl_m, p.relative_m, now):
+                self.sender.announce()  # taking off: announce it
+            self._note_position()
 
     async def _armed(self) -> None:
         async for armed in self.autopilot.armed_states():
-            if armed and not self.armed and self.relative_alt < 1.0:
-                self.has_flown = True  # departing: its path is flown from here on
-                self._beacon_now.set()  # taking off: announce it
-            self.armed = armed
+            if self.vehicle.arming(armed):
+                self.sender.announce()  # taking off: announce it
 
     async def _flight_mode(self) -> None:
         """Is the vehicle holding in the air (PX4 AUTO.LOITER, ArduPilot LOITER: paused by
         an operator or by us, or its mission over)?  Then when it flies on is unknown."""
         async for held in self.autopilot.holding_states():
-            self.held = held
+            self.vehicle.held = held
 
     async def _autopilot_watch(self) -> None:
         """Warn when the autopilot's position stops coming (real seconds: MAVLink streams run
@@ -151,7 +140,7 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
         silent = False
         while True:
             await asyncio.sleep(1.0)
-            gap = time.monotonic() - self._heard_autopilot
+            gap = time.monotonic() - self.vehicle.heard_at
             if gap >= AUTOPILOT_SILENT_S and not silent:
                 silent = True
                 logs.event(
@@ -175,6 +164,6 @@ class Companion(AliceRuns, Beaconing, BobAnswers):
         async for current, total in self.autopilot.progress():
             self._progress_seen = (current, total, self.clock.now())
             if total == len(self.mission) or not self._edit_lock.locked():
-                self.current_item = current
+                self.vehicle.current_item = current
             # (else an edit is being uploaded: the vehicle numbers the items of the new
             # mission, and the companion holds the old one until the read-back is done)

@@ -79,7 +79,7 @@ class Edits(CompanionCore):
         has its own watch."""
         while True:
             await self.clock.sleep(2.0)
-            if self.on_ground or not self.peers:
+            if self.vehicle.on_ground or not self.peers:
                 continue
             now = self.clock.now()
             running, ends = self._running or (None, now)
@@ -107,10 +107,10 @@ class Edits(CompanionCore):
         The path is what is left to fly *now*: a run's path starts where the drone was when
         it began, and distances from here along legs already flown would come out wrong."""
         settings = self.settings.failsafe
-        if peer.node in self.precaution or peer.node in self._holding or self.on_ground:
+        if peer.node in self.precaution or peer.node in self._holding or self.vehicle.on_ground:
             return  # (on the ground the drone waits for its comparisons anyway)
         start, path = self._remaining_path()
-        speed = max(self.speed_m_s, self.settings.cruise_m_s)
+        speed = max(self.vehicle.speed_m_s, self.settings.cruise_m_s)
         schedule = self._schedule(self.original, self.path, start, self.original_current)
         tolerance = self.settings.separation.tolerance
         windows = [schedule.window(k, tolerance) for k in range(start, start + len(path) - 1)]
@@ -119,7 +119,7 @@ class Edits(CompanionCore):
         # were retimed: the comparison restarts, the raise stands until its result).
         decided = self._decided(peer) | {k for k in peer.conflicts if self.raises.get(k)}
         risky = at_risk(
-            path, start, self._here(), speed, peer.position, self._peer_speed(peer), needed,
+            path, start, self.vehicle.here(), speed, peer.position, self._peer_speed(peer), needed,
             settings, decided, peer_age_s=peer.position_age(self.clock.now()),
             entered=[w[0] for w in windows], left=[w[1] for w in windows],
         )  # fmt: skip
@@ -152,7 +152,7 @@ class Edits(CompanionCore):
         vs = self.path.vertices
         end = vs[min(segment + 1, len(vs) - 1)]
         gate = min(end.items, default=0)  # the segment is flown once its end item is current
-        while peer in self._holding and self.current_item < gate:
+        while peer in self._holding and self.vehicle.current_item < gate:
             await self.clock.sleep(0.5)
         if peer not in self._holding:
             return
@@ -198,10 +198,10 @@ class Edits(CompanionCore):
         return {k: v for k, v in raises.items() if k >= first}
 
     def _edit_vehicle(self) -> PlanVehicle:
-        lat, lon, amsl = self.position
-        segment = None if self.on_ground else self.path.start_at(self.original_current)
-        lead = max(self.speed_m_s, 1.0) / self.kinematics.climb_m_s
-        return PlanVehicle(segment, lat, lon, self.relative_alt, amsl, lead)
+        lat, lon, amsl = self.vehicle.position
+        segment = None if self.vehicle.on_ground else self.path.start_at(self.original_current)
+        lead = max(self.vehicle.speed_m_s, 1.0) / self.kinematics.climb_m_s
+        return PlanVehicle(segment, lat, lon, self.vehicle.relative_alt, amsl, lead)
 
     def _keeps_clear_of(self, peer: Peer) -> bool:
         """Whether our raises keep clear of the altitude slots of ``peer`` even where we do
@@ -253,7 +253,8 @@ class Edits(CompanionCore):
                 if not same_track(held, before):
                     raise AutopilotError("the vehicle's mission changed since the start")
                 current = max(
-                    self.current_item, next((i for i, it in enumerate(held) if it.current), 0)
+                    self.vehicle.current_item,
+                    next((i for i, it in enumerate(held) if it.current), 0),
                 )
                 current = min(current, len(held) - 1)
                 original = self.edit.origin[current] if self.edit is not None else current
@@ -278,9 +279,9 @@ class Edits(CompanionCore):
             # Where the vehicle flies on: what it reported since the upload, or the item
             # the upload marked (PX4 goes on from there; its report may not have come yet).
             seen, total, when = self._progress_seen
-            self.current_item = seen if when >= sent_at and total == len(new) else mark
+            self.vehicle.current_item = seen if when >= sent_at and total == len(new) else mark
             self.edit = Edit(new, edit.origin, edit.inserted)
-            self._beacon_now.set()  # peers keep clear of our slots: tell them now, not in
+            self.sender.announce()  # peers keep clear of our slots: tell them now, not in
             # minutes (a duty-cycled beacon interval)
             self.flagged = {k for p in self.peers.values() for k in p.conflicts}
             self.record(

@@ -1,28 +1,24 @@
-"""The companion's beacons: sending its own, hearing its neighbours'.
+"""The companion's beacons: what its own say (sent by :mod:`companion.neighbours.sender`), and
+hearing its neighbours'.
 
-Position beacons every interval (tagged for every neighbour that holds our beacon key, signed
-now and then), certificate beacons when somebody cannot check us yet, and what a heard beacon
-does: only a verified beacon of a trusted drone makes or moves a
+What a heard beacon does: only a verified beacon of a trusted drone makes or moves a
 :class:`~companion.neighbours.peers.Peer` (docs/security.md, "Beacons"); an untrusted drone is
 logged, or reported as an intruder.
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
 import random
 
 from companion.app.core import ASK_BACKOFF_S
-from companion.app.state import OWN
 from companion.auth.trust import UnknownPeers
 from companion.events import EventKind, PeerHeard, Stranger
 from companion.mission.edits import Edits
-from companion.neighbours.beacon import Beacon, BeaconKind, CertBeacon, size_class
 from companion.neighbours.peers import Peer, distance_m
 from companion.neighbours.registry import NO_CERTIFICATE, Heard, Hearing
-from companion.radio.arq import LinkError
+from companion.neighbours.sender import OwnBeacon
 
 log = logging.getLogger("companion")
 _JITTER = random.SystemRandom()
@@ -32,98 +28,25 @@ ALERT_EVERY_S = 60.0  # an untrusted drone is reported at most this often (polic
 class Beaconing(Edits):
     """Sending and hearing beacons."""
 
-    def _stamp(self) -> tuple[int, int]:
-        """(time, counter) of our next beacon: together they only ever grow, also across
-        restarts (the last pair is kept on disk), so a peer never takes a fresh beacon of
-        ours for a replay."""
-        now = int(self.clock.wall()) << 8
-        if self._order is None:  # the first beacon of this start
-            self._order = self.store.last_counter(OWN) or 0
-        self._order = max(self._order + 1, now)
-        self.store.set_counter(OWN, self._order)
-        return self._order >> 8, self._order & 0xFF
-
-    def _beacon(self) -> tuple[bytes, BeaconKind]:
-        """Our position beacon (:mod:`companion.neighbours.beacon`): signed when one is due (it
-        carries our beacon key and keys hash), else tagged for every neighbour we share a key
-        with."""
-        lat, lon, alt = self.position
-        segments = self._own_size()
-        time_s, counter = self._stamp()
-        beacon = Beacon(
+    def _own_beacon(self) -> OwnBeacon | None:
+        """What our position beacon says now (None: no position from the autopilot yet)."""
+        lat, lon, alt = self.vehicle.position
+        if (lat, lon) == (0, 0):
+            return None
+        return OwnBeacon(
             lat,
             lon,
             round(alt),
-            self.on_ground,
-            frozenset({self.settings.suite}),
+            self.vehicle.on_ground,
+            self.settings.suite,
             self.version,
-            time_s,
-            counter,
             self._slots(),
-            size_class(segments),
+            self._own_size(),
         )
-        now = self.clock.now()
-        tags = self.neighbours.tag_keys(self.clock.wall() - self._silence_s)
-        if self._sign_next or now - self._signed_at >= self._signed_every_s:
-            self._sign_next, self._signed_at = False, now
-            signed = beacon.signed(
-                self.settings.node, self.identity.key, self.beacon_keys.public, self.keys_hash, tags
-            )
-            return signed, BeaconKind.SIGNED
-        return beacon.tagged(self.settings.node, tags), BeaconKind.TAGGED
 
-    def _want_signed(self) -> None:
-        """A signed beacon next (rate-limited): somebody lacks our beacon key."""
-        if self.clock.now() - self._signed_at >= self._asked_every_s:
-            self._sign_next = True
-            self._beacon_now.set()
-
-    async def _send_beacon(self, payload: bytes, kind: BeaconKind) -> None:
-        with contextlib.suppress(LinkError):
-            await self.endpoint.beacon(payload)
-            self.beacon_bytes += len(payload)
-            self.beacons_sent[kind] += 1
-
-    async def _certificates(self) -> None:
-        """Our certificate beacon: at the start, when we hear a drone we cannot check yet
-        (asking for its certificate and signed beacon: WANT) and when a peer asks for ours --
-        at most every half a beacon interval (a stranger's made-up beacons cost us at most
-        that)."""
-        while True:
-            await self._cert_now.wait()
-            wait = self._cert_sent + self._asked_every_s - self.clock.now()
-            # an answer right after the question would meet the asker's next frame
-            await self.clock.sleep(max(wait, 0.0) + _JITTER.uniform(0.1, 1.0))
-            self._cert_now.clear()
-            want, self._cert_wanted = self._cert_wanted, False
-            self._cert_sent = self.clock.now()
-            await self._send_beacon(
-                CertBeacon(self.identity.cert, want).encode(), BeaconKind.CERTIFICATE
-            )
-
-    async def _beacons(self) -> None:
-        """Beacon every interval (random phase and jitter: drones that beacon in lockstep
-        collide on every beacon), and at once when the drone takes off or hears a new peer
-        -- on a duty-cycled link the interval is minutes, discovery must not wait for it."""
-        wait = _JITTER.uniform(0, self.beacon_interval)
-        deferred = 0
-        while True:
-            with contextlib.suppress(TimeoutError):
-                await self.clock.wait_for(self._beacon_now.wait(), wait)
-            urgent = self._beacon_now.is_set()
-            if urgent:
-                self._beacon_now.clear()
-                await self.clock.sleep(_JITTER.uniform(0.0, 1.0))  # do not answer in chorus
-            if (self._sessions or self.endpoint.busy()) and not urgent and deferred < 3:
-                # A run is on the air: a beacon would only collide with its frames.
-                deferred += 1
-            elif self.position[:2] == (0, 0):
-                wait = 1.0  # no position from the autopilot yet: beacon once there is one
-                continue  # (on a duty-cycled link the interval would lose minutes)
-            else:
-                deferred = 0
-                await self._send_beacon(*self._beacon())
-            wait = self.beacon_interval * _JITTER.uniform(0.7, 1.3)
+    def _on_air(self) -> bool:
+        """A run is on the air (ours or an answer): a beacon would only collide with it."""
+        return bool(self._sessions) or self.endpoint.busy()
 
     async def _listen(self) -> None:
         while True:
@@ -145,19 +68,18 @@ class Beaconing(Edits):
             if not self._may_ask(src):
                 return
             if hearing.reason == NO_CERTIFICATE:  # ask for it (ours goes with the question)
-                self._cert_wanted = True
-                self._cert_now.set()
+                self.sender.send_certificate(ask=True)
             # Its beacon key or its tag for us is missing: with our signed beacon it gets our
             # key (and tags for us), and it answers a new key with its own signed beacon.
-            self._want_signed()
+            self.sender.want_signed()
             return
         if hearing.kind is Heard.UNTRUSTED:
             self._untrusted(hearing)
             return
         if hearing.kind is Heard.CERTIFICATE:
             if hearing.want:  # it cannot check somebody's beacons: ours, perhaps
-                self._cert_now.set()
-                self._want_signed()
+                self.sender.send_certificate()
+                self.sender.want_signed()
             if hearing.then is not None:  # its signed beacon, heard before the certificate
                 self._heard(hearing.then)
             return
@@ -166,7 +88,7 @@ class Beaconing(Edits):
         if neighbour.knows_us:
             self._asking.pop(src, None)  # nothing to ask it for any more
         if hearing.new_keys:  # a new beacon key: it may lack ours
-            self._want_signed()
+            self.sender.want_signed()
         now = self.clock.now()
         peer = self.peers.get(src)
         if peer is not None and peer.identity != neighbour.fingerprint:
@@ -186,7 +108,7 @@ class Beaconing(Edits):
                     operator=neighbour.operator.name,
                 ),
             )
-            self._beacon_now.set()  # let it hear us without waiting an interval
+            self.sender.announce()  # let it hear us without waiting an interval
         elif hearing.new_keys:
             self._drop_setups(src)  # it restarted (a new beacon key): they are gone on its side
         slots_changed = peer.beacon.slots != beacon.slots or new_peer
@@ -195,7 +117,7 @@ class Beaconing(Edits):
         # Its stamp is whole Unix seconds (truncated): the position is half a second older
         # on average; in link time (the wall clock is link time plus an offset).
         made_at = beacon.time + 0.5 - (self.clock.wall() - now)
-        peer.heard(beacon, now, self.position[:2], made_at=made_at)
+        peer.heard(beacon, now, self.vehicle.position[:2], made_at=made_at)
         # Our raises keep clear of every peer's slots (a run compared the altitudes we fly
         # without them); of two drones that raised into each other's slots the higher node
         # moves, so two never climb past each other in turn.  A peer heard for the first
@@ -216,12 +138,12 @@ class Beaconing(Edits):
         stays so -- a drone that does not trust us would otherwise make us ask at every
         beacon."""
         now = self.clock.now()
-        due, interval = self._asking.get(node, (now, self._asked_every_s / 2))
+        due, interval = self._asking.get(node, (now, self.cadence.asked_every_s / 2))
         if now < due:
             return False
         duty_cycled = self.endpoint.profile.duty_cycle is not None
-        longest = 4 * self.beacon_interval if duty_cycled else ASK_BACKOFF_S
-        longest = min(self._signed_every_s, longest)
+        longest = 4 * self.cadence.interval_s if duty_cycled else ASK_BACKOFF_S
+        longest = min(self.cadence.signed_every_s, longest)
         interval = min(2 * interval, longest)
         self._asking[node] = (now + interval, interval)
         return True
@@ -243,6 +165,6 @@ class Beaconing(Edits):
         if now - self._alerted.get(hearing.node, -math.inf) >= ALERT_EVERY_S:
             self._alerted[hearing.node] = now
             b = hearing.beacon
-            distance = distance_m(self.position[:2], (b.lat, b.lon))
+            distance = distance_m(self.vehicle.position[:2], (b.lat, b.lon))
             here = Stranger(hearing.node, drone.hex(), None, b.lat, b.lon, b.alt_m, round(distance))
             self.record(EventKind.INTRUDER, here)

@@ -73,7 +73,7 @@ class AliceRuns(Edits):
             # A full run after a near run waits until it is needed (or the channel is quiet):
             # meanwhile the radio serves every drone's near runs.
             quiet = not self.endpoint.busy(QUIET_S) and not self._radio.waiting()
-            if self.on_ground and not quiet:
+            if self.vehicle.on_ground and not quiet:
                 # Before take-off nothing is urgent, and a run started while other drones'
                 # run is on the air slows theirs (in flight, perhaps past their deadline):
                 # wait for a quiet channel, a minute at most.
@@ -121,12 +121,12 @@ class AliceRuns(Edits):
         start, :meth:`_decided`), less the margin -- a full run of our whole remaining path
         against the peer's (its beacon's size class).  On the ground: at once."""
         now = self.clock.now()
-        if self.on_ground:
+        if self.vehicle.on_ground:
             return now
-        speed = max(self.speed_m_s, self.settings.cruise_m_s)
+        speed = max(self.vehicle.speed_m_s, self.settings.cruise_m_s)
         start, path = self._remaining_path()
         covered = [k - start for k in sorted(peer.covered) if k >= start]
-        here = self._here()
+        here = self.vehicle.here()
         left = sum(
             distance_m(here if here is not None and k == 0 else a, b)
             for k, (a, b) in enumerate(itertools.pairwise(path))
@@ -162,7 +162,7 @@ class AliceRuns(Edits):
         bytes: a near run that waited for the full run's time too would cover everything
         and come too late.  Every term comes from what the beacons and the run sizes already
         tell: the horizon shows Bob nothing about Alice's path."""
-        speed = max(self.speed_m_s, self.settings.cruise_m_s)  # Bob cuts his path alike
+        speed = max(self.vehicle.speed_m_s, self.settings.cruise_m_s)  # Bob cuts his path alike
         grid = self._grid(path)
         now = self.clock.now()
         due = [p for p in self.peers.values() if self._should_compare(p, now)] or [peer]
@@ -170,7 +170,9 @@ class AliceRuns(Edits):
         # Nothing can happen before the peer could be here (both at cruise speed at least);
         # reach well past that moment.
         cruise = self.settings.cruise_m_s
-        meet = time_to_meet(self.position[:2], speed, peer, floor_m_s=cruise, measured=False)
+        meet = time_to_meet(
+            self.vehicle.position[:2], speed, peer, floor_m_s=cruise, measured=False
+        )
         meet += NEAR_SLACK_S
         meet = meet if math.isfinite(meet) else 0.0
         seconds = max(self.settings.lookahead_s, runs + self.settings.failsafe.margin_s, meet)
@@ -180,9 +182,11 @@ class AliceRuns(Edits):
         """The earliest second from now the peer could come within the separation of our
         segment a-b: its distance at cruise speed at least (it may have flown since it was
         last heard), and never before the two drones could meet at all."""
-        speed = max(self.speed_m_s, self.settings.cruise_m_s)
+        speed = max(self.vehicle.speed_m_s, self.settings.cruise_m_s)
         cruise = self.settings.cruise_m_s
-        meet = time_to_meet(self.position[:2], speed, peer, floor_m_s=cruise, measured=False)
+        meet = time_to_meet(
+            self.vehicle.position[:2], speed, peer, floor_m_s=cruise, measured=False
+        )
         gap = segment_distance_m(peer.position, a, b) - self.settings.separation.horizontal_m
         reach = max(gap, 0.0) / self._peer_pace(peer) - self._silent_for(peer)
         return max(meet, reach)
@@ -192,7 +196,7 @@ class AliceRuns(Edits):
         near them (:meth:`_peer_earliest`, less the margin): no volume of the peer's can
         meet them, and a near run without them is smaller and sooner.  At least two
         segments stay; the full run compares everything left."""
-        if self.on_ground or len(path) <= 3 or not self.settings.lookahead_s:
+        if self.vehicle.on_ground or len(path) <= 3 or not self.settings.lookahead_s:
             return 0
         schedule = self._schedule(self.original, self.path, start, self.original_current)
         tolerance = self.settings.separation.tolerance
@@ -227,7 +231,7 @@ class AliceRuns(Edits):
         the same time ahead at the peer's speed (the near run's decisions last as long as
         the horizon at the peer's speed, :meth:`_decided`)."""
         # The same time ahead as ours: the peer may fly faster than we do.
-        ours = max(self.speed_m_s, self.settings.cruise_m_s)
+        ours = max(self.vehicle.speed_m_s, self.settings.cruise_m_s)
         theirs = self._peer_pace(peer)
         horizon = max(horizon, math.ceil(horizon * theirs / ours))
         schedule = self._schedule(self.original, self.path, start, self.original_current)
@@ -250,7 +254,7 @@ class AliceRuns(Edits):
         full run's result can come -- for them it could only come too late; the fail-safe
         watches them until the near run's decision expires.  A full run without them is
         smaller and sooner."""
-        if peer.near_run is None or self.on_ground:
+        if peer.near_run is None or self.vehicle.on_ground:
             return 0
         decided = self._decided(peer)
         schedule = self._schedule(self.original, self.path, start, self.original_current)
@@ -280,7 +284,7 @@ class AliceRuns(Edits):
         part first.  On the ground (nothing is urgent) all of them.  Never more than the peer
         answers (:meth:`_most_segments`)."""
         segments = min(len(path) - 1, self._most_segments(peer, path))
-        if self.on_ground or segments <= 2:
+        if self.vehicle.on_ground or segments <= 2:
             return segments
         schedule = self._schedule(self.original, self.path, start, self.original_current)
         enter = schedule.window(start, self.settings.separation.tolerance)[0]
@@ -312,7 +316,7 @@ class AliceRuns(Edits):
         if phase is Phase.NEAR:
             skip = self._before_meeting(peer, start, path)
             if skip:  # what is left of the horizon after the segments skipped
-                here = self._here()
+                here = self.vehicle.here()
                 left = horizon - sum(
                     distance_m(here if here is not None and k == 0 else a, b)
                     for k, (a, b) in enumerate(itertools.pairwise(path[: skip + 1]))
@@ -459,7 +463,7 @@ class AliceRuns(Edits):
                     self.record(EventKind.PEER_BUSY, PeerNote(peer=peer.node, phase=phase))
                     return False
                 if exc.code is Refusal.UNKNOWN_PEER:
-                    self._cert_now.set()  # it lacks our certificate: beacon it
+                    self.sender.send_certificate()  # it lacks our certificate: beacon it
                 box = exc.code is Refusal.BOX  # off our beacons, or beyond its limits
                 self.record(
                     EventKind.RUN_FAILED,

@@ -60,14 +60,14 @@ class BobAnswers(CompanionCore):
         resolution = hello.grid.resolution_mm
         since = self._wall_of_state() - volumes.epoch_s
         if len(path) < 2:  # a point: here, from now on
-            alt = self.position[2]
+            alt = self.vehicle.position[2]
             cells = 1000.0 / resolution
             band = (
                 math.floor((alt - tolerance.altitude_m) * cells),
                 math.ceil((alt + tolerance.altitude_m) * cells),
             )
             return PathRoute(tuple(points), (band,), ((math.floor(since), T_RANGE_S),))
-        schedule = self._schedule(self.mission, self.flown, start, self.current_item)
+        schedule = self._schedule(self.mission, self.flown, start, self.vehicle.current_item)
         bands, windows = route_volumes(schedule, start, len(path) - 1, resolution, since, tolerance)
         return PathRoute(tuple(points), bands, windows)
 
@@ -169,9 +169,8 @@ class BobAnswers(CompanionCore):
                 return None
             # A drone whose certificate (or beacon) we lack: say so -- signed, at most every
             # half a beacon interval -- and ask for its certificate.
-            self._cert_wanted = True
-            self._cert_now.set()
-            if self.clock.now() - self._unknown_refused >= self._asked_every_s:
+            self.sender.send_certificate(ask=True)
+            if self.clock.now() - self._unknown_refused >= self.cadence.asked_every_s:
                 self._unknown_refused = self.clock.now()
                 await self._refuse(peer, session, responder, Refusal.UNKNOWN_PEER)
             else:
@@ -269,7 +268,7 @@ class BobAnswers(CompanionCore):
         if known.anchor is None:
             return False
         centre = (grid.ref_lat_e7, grid.ref_lon_e7)
-        if distance_m(centre, self.position[:2]) > self.settings.max_peer_range_m:
+        if distance_m(centre, self.vehicle.position[:2]) > self.settings.max_peer_range_m:
             return False  # not where a drone we hear on our radio can be
         return distance_m(centre, known.anchor[1]) <= known.reach_m(self.clock.now())
 

@@ -171,7 +171,7 @@ def build_report(
         run_auth = sum(
             e.payload.auth_bytes for e in c.events if isinstance(e.payload, RunResult | Answered)
         )
-        position_beacons = c.beacons_sent[BeaconKind.SIGNED] + c.beacons_sent[BeaconKind.TAGGED]
+        position_beacons = c.sender.sent[BeaconKind.SIGNED] + c.sender.sent[BeaconKind.TAGGED]
         drones.append(
             DroneReport(
                 id=d.id,
@@ -199,9 +199,10 @@ def build_report(
                 airtime_s=round(stats.airtime_s, 3),
                 auth=AuthCost(
                     run_bytes=run_auth,
-                    beacon_bytes=c.beacon_bytes,
-                    beacons={str(k): v for k, v in c.beacons_sent.items()},
-                    beacon_added_bytes=c.beacon_bytes - UNAUTHENTICATED_SIZE * position_beacons,
+                    beacon_bytes=c.sender.bytes_sent,
+                    beacons={str(k): v for k, v in c.sender.sent.items()},
+                    beacon_added_bytes=c.sender.bytes_sent
+                    - UNAUTHENTICATED_SIZE * position_beacons,
                 ),
                 guard_bytes=sum(
                     e.payload.guard_bytes for e in c.events if isinstance(e.payload, Answered)

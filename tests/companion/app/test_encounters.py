@@ -337,9 +337,13 @@ def _guarded(busy_s: float, raised: bool = False) -> tuple[Companion, FakeAutopi
         clock = Clock()
         c, autopilot = alone(items, clock)
         c.path = flight_path(items, None)
-        c.relative_alt, c.current_item, c.speed_m_s = 30.0, 2, 10.0  # airborne, segment 0
+        c.vehicle.relative_alt, c.vehicle.current_item, c.vehicle.speed_m_s = (
+            30.0,
+            2,
+            10.0,
+        )  # airborne, segment 0
         (lat, west), (_, east_) = c.path.points[:2]  # -600 and -250 m: half-way, flying east
-        c.position = (lat, (west + east_) // 2, 518.0)
+        c.vehicle.position = (lat, (west + east_) // 2, 518.0)
         south = (C_LAT - round(800 / M_PER_E7_LAT), C_LON)
         c.peers[2] = Peer(
             2, beacon(south), heard_at=clock.now(), conflicts={1} if raised else set()
@@ -416,7 +420,7 @@ def test_edit_is_built_on_the_held_mission_and_keeps_the_current_item() -> None:
         c, autopilot = alone(vehicle, Clock())
         c.original = c.mission = list(items)
         c.path = flight_path(items, None)
-        c.relative_alt, c.current_item = 30.0, 2
+        c.vehicle.relative_alt, c.vehicle.current_item = 30.0, 2
         c.precaution[2] = {2}
         await c._replan("test")
         return c, autopilot

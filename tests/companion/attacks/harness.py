@@ -222,14 +222,13 @@ async def world(
         c.original = c.mission = list(items)
         c.home = (*home_e7, home[2])
         c.path = flight_path(items, home_e7)
-        c.position = (*home_e7, home[2])
+        c.vehicle.position = (*home_e7, home[2])
         c.epoch = clock.now()
         drones[node], autopilots[node], taps[node] = c, autopilot, tap
     w = World(clock, medium, sniffer, drones, autopilots, taps, creds)
     for c in drones.values():
         await c.endpoint.start()
-        for work in (c._certificates, c._beacons, c._listen, c._serve, c._alice_loop):
-            c._spawn(work(), work.__name__)
+        c.start_radio()
     return w
 
 

@@ -169,10 +169,14 @@ async def restart(w: World, node: int) -> Any:
         w.credentials[node],
     )
     c.original = c.mission = list(old.original)
-    c.home, c.path, c.position, c.epoch = old.home, old.path, old.position, w.clock.now()
+    c.home, c.path, c.vehicle.position, c.epoch = (
+        old.home,
+        old.path,
+        old.vehicle.position,
+        w.clock.now(),
+    )
     await c.endpoint.start()
-    for work in (c._certificates, c._beacons, c._listen, c._serve, c._alice_loop):
-        c._spawn(work(), work.__name__)
+    c.start_radio()
     w.drones[node] = c
     return c
 

@@ -180,7 +180,7 @@ def test_paper_suite_keys_must_match_the_beacons(tmp_path: Path) -> None:
             tmp_path / str(forge_keys), settings={"suite": Suite.PAPER}, paper_keys=True
         )
         if forge_keys:
-            w.drones[2].keys_hash = bytes(16)  # what its beacons will say from now on
+            w.drones[2].sender.keys_hash = bytes(16)  # what its beacons will say from now on
         await w.clock.sleep(3600)
         await w.stop()
         return w
