@@ -8,6 +8,7 @@ import argparse
 import asyncio
 import difflib
 import sys
+from typing import Any, TypeAlias
 
 from companion.cli import commands
 from companion.cli import keys as keys_cli
@@ -70,19 +71,19 @@ def _log_flags(parser: argparse.ArgumentParser, level_help: str) -> None:
     )
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = cli.Parser(prog="drone-deconflict", description=DESCRIPTION)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    probability = cli.probability
+Subparsers: TypeAlias = "argparse._SubParsersAction[Any]"  # the subcommands
+
+
+def _add_hub(sub: Subparsers) -> None:
     hub = sub.add_parser("link-hub", help="a simulated radio channel shared over UDP")
     hub.add_argument("--host", type=cli.host, default="127.0.0.1", help="address to listen on")
     hub.add_argument(
         "--port", type=cli.listen_port, default=14600, help="UDP port to listen on (0: any)"
     )
-    hub.add_argument("--loss", type=probability, default=0.0, help="frame loss probability")
-    hub.add_argument("--corrupt", type=probability, default=0.0, help="corruption probability")
-    hub.add_argument("--duplicate", type=probability, default=0.0, help="duplication rate")
-    hub.add_argument("--reorder", type=probability, default=0.0, help="reordering probability")
+    hub.add_argument("--loss", type=cli.probability, default=0.0, help="frame loss probability")
+    hub.add_argument("--corrupt", type=cli.probability, default=0.0, help="corruption probability")
+    hub.add_argument("--duplicate", type=cli.probability, default=0.0, help="duplication rate")
+    hub.add_argument("--reorder", type=cli.probability, default=0.0, help="reordering probability")
     hub.add_argument("--latency", type=cli.number(0, 60), default=0.002, help="seconds")
     hub.add_argument("--seed", type=cli.seed, default=None, help="channel seed (default: random)")
     hub.add_argument(
@@ -91,6 +92,8 @@ def _parser() -> argparse.ArgumentParser:
     hub.add_argument("--no-collisions", action="store_true", help="overlapping frames both pass")
     hub.set_defaults(func=lambda a: asyncio.run(commands.hub(a)))
 
+
+def _add_mock(sub: Subparsers) -> None:
     mock = sub.add_parser("mock-autopilot", help="a MAVLink autopilot for tests and replays")
     mock.add_argument(
         "--mission", type=cli.existing_file, help=".plan or QGC WPL 110 file to start with"
@@ -149,6 +152,8 @@ def _parser() -> argparse.ArgumentParser:
     )
     mock.set_defaults(func=lambda a: asyncio.run(commands.mock(a)))
 
+
+def _add_mission(sub: Subparsers) -> None:
     mission = sub.add_parser("mission", help="mission files")
     mission_sub = mission.add_subparsers(dest="action", required=True, metavar="ACTION")
     show = mission_sub.add_parser("show", help="print a mission and its segments")
@@ -156,6 +161,8 @@ def _parser() -> argparse.ArgumentParser:
     show.add_argument("--ardupilot", action="store_true", help="item 0 is home")
     show.set_defaults(func=commands.mission_show)
 
+
+def _add_compare(sub: Subparsers) -> None:
     compare = sub.add_parser("compare", help="the encrypted path comparison over the radio link")
     compare.add_argument(
         "alice",
@@ -184,8 +191,10 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="public grid range R (default: the files' extent)",
     )
-    compare.add_argument("--loss", type=probability, default=0.0, help="frame loss probability")
-    compare.add_argument("--corrupt", type=probability, default=0.0, help="corruption probability")
+    compare.add_argument("--loss", type=cli.probability, default=0.0, help="frame loss probability")
+    compare.add_argument(
+        "--corrupt", type=cli.probability, default=0.0, help="corruption probability"
+    )
     compare.add_argument(
         "--seed", type=cli.seed, default=None, help="channel seed (default: random)"
     )
@@ -198,6 +207,8 @@ def _parser() -> argparse.ArgumentParser:
     compare.add_argument("--json", action="store_true", help="machine-readable output")
     compare.set_defaults(func=commands.compare)
 
+
+def _add_bench(sub: Subparsers) -> None:
     bench = sub.add_parser(
         "bench-link", help="30 single-segment pairs and an 8x8 run over each profile"
     )
@@ -222,9 +233,13 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     bench.set_defaults(func=commands.bench_link)
 
+
+def _add_demo(sub: Subparsers) -> None:
     demo = sub.add_parser("radio-demo", help="the demo's comparison over simulated LoRa profiles")
     demo.set_defaults(func=lambda a: commands.radio_demo())
 
+
+def _add_replay(sub: Subparsers) -> None:
     replay = sub.add_parser("replay", help="fly a scenario: mock autopilots, MAVSDK, companions")
     replay.add_argument(
         "scenario", type=cli.existing_file, help="scenario TOML (see sitl_configs/scenarios/)"
@@ -265,6 +280,8 @@ def _parser() -> argparse.ArgumentParser:
     _log_flags(replay, "companions' log on stderr (default: warning)")
     replay.set_defaults(func=commands.replay)
 
+
+def _add_run(sub: Subparsers) -> None:
     run = sub.add_parser("run", help="the companion process beside one autopilot")
     run.add_argument(
         "--config", type=cli.existing_file, help="TOML settings, [identity] and [trust] included"
@@ -324,6 +341,19 @@ def _parser() -> argparse.ArgumentParser:
     _log_flags(run, "log level (default: the config's, else info)")
     run.set_defaults(func=commands.run_command)
 
+
+def _parser() -> argparse.ArgumentParser:
+    """The command line: one function per subcommand."""
+    parser = cli.Parser(prog="drone-deconflict", description=DESCRIPTION)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_hub(sub)
+    _add_mock(sub)
+    _add_mission(sub)
+    _add_compare(sub)
+    _add_bench(sub)
+    _add_demo(sub)
+    _add_replay(sub)
+    _add_run(sub)
     keys_cli.add_parser(sub)
     cli.add_common(parser)
     return parser

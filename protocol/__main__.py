@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import Any, TypeAlias
 
 from protocol.geo.volumes import MAX_SEPARATION
 from protocol.tools import cli
@@ -89,12 +90,15 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = cli.Parser(prog="drone-deconflict-protocol", description=DESCRIPTION)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+Subparsers: TypeAlias = "argparse._SubParsersAction[Any]"  # the subcommands
+
+
+def _add_demo(sub: Subparsers) -> None:
     demo = sub.add_parser("demo", help="two-drone demonstration")
     demo.set_defaults(func=_demo)
 
+
+def _add_compare(sub: Subparsers) -> None:
     compare = sub.add_parser("compare", help="run the encrypted path comparison on two files")
     compare.add_argument(
         "alice",
@@ -137,6 +141,8 @@ def _parser() -> argparse.ArgumentParser:
         compare.add_argument(option, action=cli.Moved, to=MOVED)
     compare.set_defaults(func=_compare)
 
+
+def _add_bench(sub: Subparsers) -> None:
     bench = sub.add_parser("bench", help="benchmarks that print tables")
     bench.add_argument(
         "what",
@@ -182,6 +188,15 @@ def _parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     bench.set_defaults(func=_bench)
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The command line: one function per subcommand."""
+    parser = cli.Parser(prog="drone-deconflict-protocol", description=DESCRIPTION)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_demo(sub)
+    _add_compare(sub)
+    _add_bench(sub)
     cli.add_common(parser)
     return parser
 

@@ -173,13 +173,13 @@ def _credentials(doc: Table, base: Path, node: int) -> Credentials | None:
     return Credentials(Identity(key, cert), TrustStore(operators, UnknownPeers(policy)), state)
 
 
-def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
-    """Read the TOML file (optional) and apply ``overrides`` (dotted keys, from flags); every
-    key is checked (:mod:`companion.app.tables`), unknown ones included."""
-    raw: dict[str, Any] = {}
-    base = Path(path).parent if path is not None else Path.cwd()
-    if path is not None:
-        raw = load_toml(path, ConfigError)
+def _positive(table: Table, key: str, default: float, zero: bool = False) -> float:
+    return table.number(key, default, low=0.0, above=not zero)
+
+
+def _merged(path: str | Path | None, overrides: dict[str, Any] | None) -> dict[str, Any]:
+    """The TOML file (optional) with ``overrides`` (dotted keys, from flags) applied."""
+    raw: dict[str, Any] = load_toml(path, ConfigError) if path is not None else {}
     for dotted, value in (overrides or {}).items():
         if value is None:
             continue
@@ -188,96 +188,119 @@ def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None
         for parent in parents:
             table = table.setdefault(parent, {})
         table[key] = value
-    doc = Table(raw, str(path) if path is not None else "settings", ConfigError)
+    return raw
+
+
+def _link(doc: Table) -> LinkSettings:
     link = doc.table("link")
-    offset = doc.table("offset")
-    limits = doc.table("limits")
-    failsafe = doc.table("failsafe")
-    separation = doc.table("separation")
-    node = doc.optional_integer("node", low=1, high=0xFFFE)
     transport = link.text("transport", LINK.transport, ("udp", "serial"))
     profile_name = link.text("profile", LINK.profile, PROFILE_NAMES)
     host, _, port = link.text("hub", "{}:{}".format(*LINK.hub)).rpartition(":")
     if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
         raise link.fail("expected HOST:PORT with a port 1..65535", "hub")
-    level = doc.text("log_level", "info", ("debug", "info", "warning", "error"))
-    offset_m = offset.number("offset_m", BASE.offset.offset_m, low=0.0, above=True)
-    direction = offset.text("direction", BASE.offset.direction, ("up", "down"))
-    max_altitude_m = offset.number(
-        "max_altitude_m", BASE.offset.max_altitude_m, low=0.0, above=True
-    )
-    try:
-        offset_settings = OffsetSettings(
-            offset_m=offset_m, direction=direction, max_altitude_m=max_altitude_m
-        )
-    except ValueError as exc:
-        raise offset.fail(str(exc)) from None
-    suites = {s.label: s for s in Suite}
-    suite = doc.text("suite", BASE.suite.label, list(suites))
-    ot_security = doc.integer("ot_security", BASE.ot_security)
-    if ot_security not in SECURITY_LEVELS:
-        raise doc.fail(f"one of {', '.join(map(str, SECURITY_LEVELS))}", "ot_security")
-    action = failsafe.text("action", BASE.failsafe.action.value, [a.value for a in Action])
-
-    def positive(table: Table, key: str, default: float, zero: bool = False) -> float:
-        return table.number(key, default, low=0.0, above=not zero)
-
-    autopilot_url = doc.text("autopilot", DEFAULT_AUTOPILOT)
-    try:
-        check_url(autopilot_url)  # before the link or MAVSDK starts
-    except ValueError as exc:
-        raise doc.fail(str(exc), "autopilot") from None
-    companion = functools.partial(
-        CompanionSettings,
-        autopilot_url=autopilot_url,
-        ardupilot=doc.flag("ardupilot", BASE.ardupilot),
-        suite=suites[suite],
-        ot_security=ot_security,
-        offset=offset_settings,
-        beacon_interval_s=positive(limits, "beacon_interval_s", BASE.beacon_interval_s),
-        initiation_range_m=positive(limits, "initiation_range_m", BASE.initiation_range_m),
-        grid_radius_m=positive(limits, "grid_radius_m", BASE.grid_radius_m),
-        max_box_radius_m=positive(limits, "max_box_radius_m", BASE.max_box_radius_m),
-        max_peer_range_m=positive(limits, "max_peer_range_m", BASE.max_peer_range_m),
-        min_grid_resolution_mm=limits.integer(
-            "min_grid_resolution_mm", BASE.min_grid_resolution_mm, low=1
-        ),
-        max_runs_per_peer=limits.integer("max_runs_per_peer", BASE.max_runs_per_peer, low=1),
-        max_runs_total=limits.integer("max_runs_total", BASE.max_runs_total, low=1),
-        max_answer_bits_per_peer=limits.integer(
-            "max_answer_bits_per_peer", BASE.max_answer_bits_per_peer, low=1
-        ),
-        max_clock_skew_s=positive(limits, "max_clock_skew_s", BASE.max_clock_skew_s),
-        run_timeout_s=positive(limits, "run_timeout_s", BASE.run_timeout_s or math.inf),
-        lookahead_s=positive(limits, "lookahead_s", BASE.lookahead_s, zero=True),
-        failsafe=FailsafeSettings(
-            Action(action), positive(failsafe, "margin_s", BASE.failsafe.margin_s)
-        ),
-        separation=SeparationSettings(
-            positive(separation, "horizontal_m", BASE.separation.horizontal_m, zero=True),
-            positive(separation, "vertical_m", BASE.separation.vertical_m, zero=True),
-            Tolerance(
-                positive(separation, "altitude_error_m", TOLERANCE.altitude_m, zero=True),
-                positive(separation, "late_s", TOLERANCE.late_s, zero=True),
-                positive(separation, "early_s", TOLERANCE.early_s, zero=True),
-                positive(separation, "time_tolerance_rate", TOLERANCE.rate, zero=True),
-                positive(separation, "ground_wait_s", 1.0)
-                if "ground_wait_s" in separation.doc
-                else math.inf,
-            ),
-        ),
-    )
-    settings = LinkSettings(
+    return LinkSettings(
         transport,
         profile_name,
         (host, int(port)),
         link.text("serial", LINK.serial),
         link.integer("baudrate", LINK.baudrate, low=1),
     )
+
+
+def _offset(doc: Table) -> OffsetSettings:
+    offset = doc.table("offset")
+    offset_m = offset.number("offset_m", BASE.offset.offset_m, low=0.0, above=True)
+    direction = offset.text("direction", BASE.offset.direction, ("up", "down"))
+    max_altitude_m = offset.number(
+        "max_altitude_m", BASE.offset.max_altitude_m, low=0.0, above=True
+    )
+    try:
+        return OffsetSettings(offset_m=offset_m, direction=direction, max_altitude_m=max_altitude_m)
+    except ValueError as exc:
+        raise offset.fail(str(exc)) from None
+
+
+def _separation(doc: Table) -> SeparationSettings:
+    separation = doc.table("separation")
+    return SeparationSettings(
+        _positive(separation, "horizontal_m", BASE.separation.horizontal_m, zero=True),
+        _positive(separation, "vertical_m", BASE.separation.vertical_m, zero=True),
+        Tolerance(
+            _positive(separation, "altitude_error_m", TOLERANCE.altitude_m, zero=True),
+            _positive(separation, "late_s", TOLERANCE.late_s, zero=True),
+            _positive(separation, "early_s", TOLERANCE.early_s, zero=True),
+            _positive(separation, "time_tolerance_rate", TOLERANCE.rate, zero=True),
+            _positive(separation, "ground_wait_s", 1.0)
+            if "ground_wait_s" in separation.doc
+            else math.inf,
+        ),
+    )
+
+
+def _companion(doc: Table) -> functools.partial[CompanionSettings]:
+    """Every setting but the node id (checked last: unknown keys are named first)."""
+    limits = doc.table("limits")
+    failsafe = doc.table("failsafe")
+    offset = _offset(doc)
+    suites = {s.label: s for s in Suite}
+    suite = doc.text("suite", BASE.suite.label, list(suites))
+    ot_security = doc.integer("ot_security", BASE.ot_security)
+    if ot_security not in SECURITY_LEVELS:
+        raise doc.fail(f"one of {', '.join(map(str, SECURITY_LEVELS))}", "ot_security")
+    action = failsafe.text("action", BASE.failsafe.action.value, [a.value for a in Action])
+    autopilot_url = doc.text("autopilot", DEFAULT_AUTOPILOT)
+    try:
+        check_url(autopilot_url)  # before the link or MAVSDK starts
+    except ValueError as exc:
+        raise doc.fail(str(exc), "autopilot") from None
+
+    def count(key: str, default: int) -> int:
+        return limits.integer(key, default, low=1)
+
+    def positive(key: str, default: float, zero: bool = False) -> float:
+        return _positive(limits, key, default, zero)
+
+    return functools.partial(
+        CompanionSettings,
+        autopilot_url=autopilot_url,
+        ardupilot=doc.flag("ardupilot", BASE.ardupilot),
+        suite=suites[suite],
+        ot_security=ot_security,
+        offset=offset,
+        beacon_interval_s=positive("beacon_interval_s", BASE.beacon_interval_s),
+        initiation_range_m=positive("initiation_range_m", BASE.initiation_range_m),
+        grid_radius_m=positive("grid_radius_m", BASE.grid_radius_m),
+        max_box_radius_m=positive("max_box_radius_m", BASE.max_box_radius_m),
+        max_peer_range_m=positive("max_peer_range_m", BASE.max_peer_range_m),
+        min_grid_resolution_mm=count("min_grid_resolution_mm", BASE.min_grid_resolution_mm),
+        max_runs_per_peer=count("max_runs_per_peer", BASE.max_runs_per_peer),
+        max_runs_total=count("max_runs_total", BASE.max_runs_total),
+        max_answer_bits_per_peer=count("max_answer_bits_per_peer", BASE.max_answer_bits_per_peer),
+        max_clock_skew_s=positive("max_clock_skew_s", BASE.max_clock_skew_s),
+        run_timeout_s=positive("run_timeout_s", BASE.run_timeout_s or math.inf),
+        lookahead_s=positive("lookahead_s", BASE.lookahead_s, zero=True),
+        failsafe=FailsafeSettings(
+            Action(action), _positive(failsafe, "margin_s", BASE.failsafe.margin_s)
+        ),
+        separation=_separation(doc),
+    )
+
+
+def load_config(path: str | Path | None, overrides: dict[str, Any] | None = None) -> Config:
+    """Read the TOML file (optional) and apply ``overrides`` (dotted keys, from flags); every
+    key is checked (:mod:`companion.app.tables`), unknown ones included."""
+    base = Path(path).parent if path is not None else Path.cwd()
+    doc = Table(
+        _merged(path, overrides), str(path) if path is not None else "settings", ConfigError
+    )
+    node = doc.optional_integer("node", low=1, high=0xFFFE)
+    link = _link(doc)
+    level = doc.text("log_level", "info", ("debug", "info", "warning", "error"))
+    companion = _companion(doc)
     if node is None:  # unknown keys first: a misspelt "nod" says so
         doc.known |= {"identity", "trust"}
         doc.finish()
         raise doc.fail("a node id 1..65534 is required (node = N, or --node)", "node")
     credentials = _credentials(doc, base, node)
     doc.finish()
-    return Config(companion(node=node), settings, credentials, level)
+    return Config(companion(node=node), link, credentials, level)

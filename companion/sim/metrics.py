@@ -31,10 +31,10 @@ from companion.sim.report import (
     PairReport,
     ReplayReport,
 )
-from companion.sim.scenario import Scenario
+from companion.sim.scenario import DroneSpec, Scenario
 from companion.sim.vehicles import ReplayVehicle, Track
 from protocol.geo.geodesy import ground_offset
-from protocol.geo.geometry import path_hits
+from protocol.geo.geometry import Point, path_hits
 from protocol.geo.grid import GridSpec
 from protocol.geo.volumes import Route, Separation, route_hits
 
@@ -151,123 +151,22 @@ def build_report(
         d.id: tuple(point_as_segment(grid.project_path(d.path.points, checked=False)))
         for d in scenario.drones
     }
-    drones: list[DroneReport] = []
-    precautions = 0
     specs = {d.id: d for d in scenario.drones}
     capsule = Separation(math.ceil(scenario.separation_m * 1000 / grid.resolution_mm))
+    drones = []
     for d in scenario.drones:
-        c = companions[d.id]
         others = [
             p for k, p in paths.items() if k != d.id and scenario.trusted_pair(d, specs[k])
         ]  # (a drone nobody deconflicts with has nothing to flag)
         hits = [route_hits(Route(paths[d.id]), Route(o), capsule) for o in others]
         plain = [any(h) for h in zip(*hits, strict=True)] if hits else [False] * d.path.segments
-        flagged = sorted(c.flagged)
-        precautionary = [
-            {"t_s": round(e.t, 1), **e.detail} for e in c.events if e.kind is K.PRECAUTIONARY
-        ]
-        precautions += len(precautionary)
-        stats = c.endpoint.stats
-        run_auth = sum(
-            e.payload.auth_bytes for e in c.events if isinstance(e.payload, RunResult | Answered)
-        )
-        position_beacons = c.sender.sent[BeaconKind.SIGNED] + c.sender.sent[BeaconKind.TAGGED]
-        drones.append(
-            DroneReport(
-                id=d.id,
-                operator=d.operator,
-                autopilot="ardupilot" if d.ardupilot else "px4",
-                vehicle=mocks[d.id].kind,
-                segments=d.path.segments,
-                conflicting_segments=[k for k, h in enumerate(plain) if h],
-                flagged_segments=flagged,
-                raises={str(k): v for k, v in sorted(c.raises.items())},
-                edits=[e.detail for e in c.events if e.kind is K.UPLOADED],
-                edit=_edit_status(c),
-                runs_unfinished=_unfinished(c),
-                runs=[e.detail | {"t_s": round(e.t, 1)} for e in c.events if e.kind is K.RESULT],
-                failures=[e.detail | {"kind": e.kind} for e in c.events if e.failed],
-                precautionary=precautionary,
-                timeline=[
-                    {"t_s": round(e.t, 1), "kind": e.kind}
-                    | {k: v for k, v in e.detail.items() if k in ("peer", "phase", "why")}
-                    for e in c.events
-                    if e.kind in TIMELINE
-                ],
-                bytes_sent=stats.bytes_sent,
-                frames_sent=stats.frames_sent,
-                airtime_s=round(stats.airtime_s, 3),
-                auth=AuthCost(
-                    run_bytes=run_auth,
-                    beacon_bytes=c.sender.bytes_sent,
-                    beacons={str(k): v for k, v in c.sender.sent.items()},
-                    beacon_added_bytes=c.sender.bytes_sent
-                    - UNAUTHENTICATED_SIZE * position_beacons,
-                ),
-                guard_bytes=sum(
-                    e.payload.guard_bytes for e in c.events if isinstance(e.payload, Answered)
-                ),
-                untrusted_heard=[
-                    e.payload.drone
-                    for e in c.events
-                    if e.kind is K.UNTRUSTED and isinstance(e.payload, Stranger)
-                ],
-                beacons_rejected=dict(c.rejected),
-                max_altitude_m_amsl=round(
-                    max((alt for *_, alt in mocks[d.id].trajectory), default=0.0), 2
-                ),
-                vehicle_holds=_holds(held[d.id], d.mission, c.mission, d.ardupilot),
-            )
-        )
-    pairs: list[PairReport] = []
-    resolved, conflicts, untrusted, false_alarms, worse = 0, 0, 0, 0, 0
+        drones.append(_drone_report(d, companions[d.id], mocks[d.id], held[d.id], plain))
     ids = [d.id for d in scenario.drones]
-    r, v = scenario.separation_m, scenario.vertical_separation_m
-    for i, a in enumerate(ids):
-        for b in ids[i + 1 :]:
-            crossing = any(path_hits(paths[a], paths[b]))
-            near = any(route_hits(Route(paths[a]), Route(paths[b]), capsule))
-            with_companion, when, _, _ = closest(mocks[a].trajectory, mocks[b].trajectory)
-            without, _, _, _ = closest(baseline[a], baseline[b])
-            trusted = scenario.trusted_pair(specs[a], specs[b])
-            # each vehicle holds its altitude to within its own accuracy
-            tolerance = mocks[a].altitude_accuracy_m + mocks[b].altitude_accuracy_m
-            inside_before, met = intrusion(baseline[a], baseline[b], r, v)
-            inside_after, _ = intrusion(mocks[a].trajectory, mocks[b].trajectory, r, v - tolerance)
-            conflict = inside_before > 0
-            # a pair with an operator outside the trust store is deliberately not deconflicted
-            acted = trusted and (_acted(companions[a], b, met) or _acted(companions[b], a, met))
-            ever = trusted and (
-                _acted(companions[a], b, math.inf, clear_of=False)
-                or _acted(companions[b], a, math.inf, clear_of=False)
-            )
-            ok = conflict and acted and inside_after == 0
-            made_worse = with_companion < without - tolerance and inside_after > 0
-            false_alarm = ever and not conflict
-            untrusted += conflict and not trusted
-            conflicts += conflict and trusted
-            resolved += ok
-            false_alarms += false_alarm
-            worse += made_worse
-            pairs.append(
-                PairReport(
-                    drones=(a, b),
-                    trusted=trusted,
-                    paths_cross=crossing,
-                    paths_near=near,
-                    conflict=conflict,
-                    acted=acted,
-                    resolved=ok,
-                    made_worse=made_worse,
-                    false_alarm=false_alarm,
-                    closest_approach_m=round(with_companion, 2),
-                    closest_approach_t_s=round(when, 1),
-                    closest_approach_baseline_m=round(without, 2),
-                    resolved_tolerance_m=tolerance,
-                    inside_s=round(inside_after, 1),
-                    inside_baseline_s=round(inside_before, 1),
-                )
-            )
+    pairs = [
+        _pair_report(scenario, specs[a], specs[b], paths, capsule, mocks, baseline, companions)
+        for i, a in enumerate(ids)
+        for b in ids[i + 1 :]
+    ]
     return ReplayReport(
         scenario=scenario.name,
         link=LinkInfo(scenario.link_profile, scenario.loss, scenario.seed),
@@ -277,15 +176,120 @@ def build_report(
         offset_m=scenario.offset_m,
         drones=drones,
         pairs=pairs,
-        conflicts=conflicts,
-        conflicts_resolved=resolved,
-        untrusted_conflicts=untrusted,
-        precautionary_actions=precautions,
-        false_alarms=false_alarms,
-        made_worse=worse,
-        separation_m=r,
-        vertical_separation_m=v,
+        conflicts=sum(p.conflict and p.trusted for p in pairs),
+        conflicts_resolved=sum(p.resolved for p in pairs),
+        untrusted_conflicts=sum(p.conflict and not p.trusted for p in pairs),
+        precautionary_actions=sum(len(d.precautionary) for d in drones),
+        false_alarms=sum(p.false_alarm for p in pairs),
+        made_worse=sum(p.made_worse for p in pairs),
+        separation_m=scenario.separation_m,
+        vertical_separation_m=scenario.vertical_separation_m,
     ).judged()
+
+
+def _drone_report(
+    d: DroneSpec,
+    c: Companion,
+    vehicle: ReplayVehicle,
+    held: list[MissionItem],
+    plain: list[bool],
+) -> DroneReport:
+    """One drone: what its companion found, did and sent; ``plain``: its segments that the
+    plaintext predicate finds in conflict with a peer's path."""
+    stats = c.endpoint.stats
+    run_auth = sum(
+        e.payload.auth_bytes for e in c.events if isinstance(e.payload, RunResult | Answered)
+    )
+    position_beacons = c.sender.sent[BeaconKind.SIGNED] + c.sender.sent[BeaconKind.TAGGED]
+    return DroneReport(
+        id=d.id,
+        operator=d.operator,
+        autopilot="ardupilot" if d.ardupilot else "px4",
+        vehicle=vehicle.kind,
+        segments=d.path.segments,
+        conflicting_segments=[k for k, h in enumerate(plain) if h],
+        flagged_segments=sorted(c.flagged),
+        raises={str(k): v for k, v in sorted(c.raises.items())},
+        edits=[e.detail for e in c.events if e.kind is K.UPLOADED],
+        edit=_edit_status(c),
+        runs_unfinished=_unfinished(c),
+        runs=[e.detail | {"t_s": round(e.t, 1)} for e in c.events if e.kind is K.RESULT],
+        failures=[e.detail | {"kind": e.kind} for e in c.events if e.failed],
+        precautionary=[
+            {"t_s": round(e.t, 1), **e.detail} for e in c.events if e.kind is K.PRECAUTIONARY
+        ],
+        timeline=[
+            {"t_s": round(e.t, 1), "kind": e.kind}
+            | {k: v for k, v in e.detail.items() if k in ("peer", "phase", "why")}
+            for e in c.events
+            if e.kind in TIMELINE
+        ],
+        bytes_sent=stats.bytes_sent,
+        frames_sent=stats.frames_sent,
+        airtime_s=round(stats.airtime_s, 3),
+        auth=AuthCost(
+            run_bytes=run_auth,
+            beacon_bytes=c.sender.bytes_sent,
+            beacons={str(k): v for k, v in c.sender.sent.items()},
+            beacon_added_bytes=c.sender.bytes_sent - UNAUTHENTICATED_SIZE * position_beacons,
+        ),
+        guard_bytes=sum(e.payload.guard_bytes for e in c.events if isinstance(e.payload, Answered)),
+        untrusted_heard=[
+            e.payload.drone
+            for e in c.events
+            if e.kind is K.UNTRUSTED and isinstance(e.payload, Stranger)
+        ],
+        beacons_rejected=dict(c.rejected),
+        max_altitude_m_amsl=round(max((alt for *_, alt in vehicle.trajectory), default=0.0), 2),
+        vehicle_holds=_holds(held, d.mission, c.mission, d.ardupilot),
+    )
+
+
+def _pair_report(
+    scenario: Scenario,
+    da: DroneSpec,
+    db: DroneSpec,
+    paths: dict[int, tuple[Point, ...]],
+    capsule: Separation,
+    mocks: dict[int, ReplayVehicle],
+    baseline: dict[int, Track],
+    companions: dict[int, Companion],
+) -> PairReport:
+    """One pair: did their protected volumes meet without the companions (a conflict), and
+    with them; did they act, in time, and was it enough."""
+    a, b = da.id, db.id
+    r, v = scenario.separation_m, scenario.vertical_separation_m
+    with_companion, when, _, _ = closest(mocks[a].trajectory, mocks[b].trajectory)
+    without, _, _, _ = closest(baseline[a], baseline[b])
+    trusted = scenario.trusted_pair(da, db)
+    # each vehicle holds its altitude to within its own accuracy
+    tolerance = mocks[a].altitude_accuracy_m + mocks[b].altitude_accuracy_m
+    inside_before, met = intrusion(baseline[a], baseline[b], r, v)
+    inside_after, _ = intrusion(mocks[a].trajectory, mocks[b].trajectory, r, v - tolerance)
+    conflict = inside_before > 0
+    # a pair with an operator outside the trust store is deliberately not deconflicted
+    acted = trusted and (_acted(companions[a], b, met) or _acted(companions[b], a, met))
+    ever = trusted and (
+        _acted(companions[a], b, math.inf, clear_of=False)
+        or _acted(companions[b], a, math.inf, clear_of=False)
+    )
+    return PairReport(
+        drones=(a, b),
+        trusted=trusted,
+        paths_cross=any(path_hits(paths[a], paths[b])),
+        paths_near=any(route_hits(Route(paths[a]), Route(paths[b]), capsule)),
+        conflict=conflict,
+        acted=acted,
+        resolved=conflict and acted and inside_after == 0,
+        made_worse=with_companion < without - tolerance and inside_after > 0,
+        false_alarm=ever and not conflict,
+        closest_approach_m=round(with_companion, 2),
+        closest_approach_t_s=round(when, 1),
+        closest_approach_baseline_m=round(without, 2),
+        resolved_tolerance_m=tolerance,
+        inside_s=round(inside_after, 1),
+        inside_baseline_s=round(inside_before, 1),
+    )
 
 
 def _edit_status(c: Companion) -> EditStatus:

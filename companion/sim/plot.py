@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from companion.sim.metrics import closest, enu
-from companion.sim.replay import Replay
+from companion.sim.replay import Replay, Tracks
+from companion.sim.report import ReplayReport
 from companion.sim.scenario import ScenarioError
 from companion.sim.vehicles import Track
 
@@ -46,6 +49,28 @@ def plot_report(replay: Replay, out: str | Path) -> None:
     fig, (ground, gap, height) = plt.subplots(1, 3, figsize=(19, 6))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     colour = {d.id: colours[n % len(colours)] for n, d in enumerate(report.drones)}
+    _ground(ground, report, tracks, colour, en)
+    _gaps(gap, report, tracks, colour)
+    _heights(height, report, tracks, colour)
+    fig.tight_layout()
+    tmp = out.with_name(f".{out.name}.tmp")
+    try:
+        fig.savefig(tmp, dpi=100, format=kind)
+        tmp.replace(out)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
+
+
+def _ground(
+    ground: Any,
+    report: ReplayReport,
+    tracks: Tracks,
+    colour: dict[int, str],
+    en: Callable[[float, float], tuple[float, float]],
+) -> None:
+    """Ground tracks: planned, flown with direction arrows, flagged segments, and each
+    pair's closest approach."""
     for drone in report.drones:
         ident, c = drone.id, colour[drone.id]
         path = [en(lat / 1e7, lon / 1e7) for lat, lon in tracks.paths[ident]]
@@ -79,6 +104,10 @@ def plot_report(replay: Replay, out: str | Path) -> None:
     ground.set_aspect("equal", adjustable="datalim")
     ground.legend(loc="best", fontsize=7)
 
+
+def _gaps(gap: Any, report: ReplayReport, tracks: Tracks, colour: dict[int, str]) -> None:
+    """The 3-D distance of every pair over time, with and without the companions, and the
+    moments of the runs and edits that concern the pair."""
     for pair in report.pairs:
         a, b = pair.drones
         for which, style in ((tracks.flown, "-"), (tracks.baseline, ":")):
@@ -106,6 +135,9 @@ def plot_report(replay: Replay, out: str | Path) -> None:
     gap.set_yscale("symlog", linthresh=20)
     gap.legend(loc="best", fontsize=7)
 
+
+def _heights(height: Any, report: ReplayReport, tracks: Tracks, colour: dict[int, str]) -> None:
+    """Altitudes, planned and flown, over the window in which anything flies."""
     for drone in report.drones:
         ident, c = drone.id, colour[drone.id]
         for which, style, label in (
@@ -130,14 +162,6 @@ def plot_report(replay: Replay, out: str | Path) -> None:
         title="altitude while flying",
     )
     height.legend(loc="best", fontsize=7)
-    fig.tight_layout()
-    tmp = out.with_name(f".{out.name}.tmp")
-    try:
-        fig.savefig(tmp, dpi=100, format=kind)
-        tmp.replace(out)
-    finally:
-        plt.close(fig)
-        tmp.unlink(missing_ok=True)
 
 
 def _flight_window(flown: dict[int, Track], margin_s: float = 30.0) -> tuple[float, float] | None:

@@ -22,12 +22,14 @@ import logging
 import socket
 import sys
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from companion.app.runtime import Companion, CompanionSettings
 from companion.events import Event, EventKind, Retimed, RunResult, RunStarted, Uploaded
 from companion.mission.autopilot import Autopilot, AutopilotBase
+from companion.mission.items import MissionItem
 from companion.mission.personalities import personality
 from companion.mission.planner import OffsetSettings
 from companion.mission.schedule import SeparationSettings
@@ -41,7 +43,7 @@ from companion.sim.mock_autopilot import Faults, FlightModel, MockAutopilot
 from companion.sim.paced_clock import PacedClock
 from companion.sim.px4 import Px4Build
 from companion.sim.report import ReplayReport
-from companion.sim.scenario import Scenario, ScenarioError
+from companion.sim.scenario import DroneSpec, Scenario, ScenarioError
 from companion.sim.vehicles import MockVehicle, Px4SitlVehicle, ReplayVehicle, Track
 from companion.sim.virtual_time import VirtualTimeLoop, run_simulated
 from companion.tasks import spawn
@@ -169,6 +171,174 @@ def run_virtual(scenario: Scenario, *, progress: bool = False) -> Replay:
     return run_simulated(run_replay(scenario, progress=progress, virtual=True))
 
 
+def _vehicle(
+    d: DroneSpec,
+    scenario: Scenario,
+    px4: Px4Build | None,
+    ts: float,
+    flight: FlightModel,
+    clock: Clock,
+    *,
+    virtual: bool,
+) -> ReplayVehicle:
+    """Drone ``d``'s vehicle: in this process (virtual), a mock autopilot on loopback UDP, or
+    a PX4 SITL instance of the build ``px4``."""
+    if virtual:
+        return InProcessVehicle(
+            d.mission, d.home, ardupilot=d.ardupilot, flight=flight, clock=clock
+        )
+    if px4 is None:
+        return MockVehicle(
+            d.mission,
+            d.home,
+            ardupilot=d.ardupilot,
+            flight=flight,
+            faults=d.faults,
+            bind_port=free_udp_port(),
+            send_port=free_udp_port(),
+            clock=clock,
+        )
+    if d.ardupilot:
+        raise ScenarioError(f"drone {d.id}: PX4 SITL cannot fly an ArduPilot drone")
+    return Px4SitlVehicle(
+        px4, d.mission, d.home, speed_factor=ts, cruise_m_s=scenario.cruise_m_s, clock=clock
+    )
+
+
+def _settings(d: DroneSpec, scenario: Scenario, url: str) -> CompanionSettings:
+    """Drone ``d``'s companion settings: the scenario's, else the companion's defaults."""
+    return CompanionSettings(
+        node=d.id,
+        autopilot_url=url,
+        ardupilot=d.ardupilot,
+        offset=OffsetSettings(offset_m=scenario.offset_m),
+        beacon_interval_s=scenario.beacon_interval_s,
+        grid_radius_m=scenario.grid_radius_m,
+        grid_resolution_mm=scenario.grid_resolution_mm,
+        lookahead_s=scenario.lookahead_s,
+        run_timeout_s=None,  # a scenario's runs end by its own time limit
+        cruise_m_s=scenario.cruise_m_s,
+        failsafe=FailsafeSettings(action=scenario.failsafe),
+        separation=SeparationSettings(scenario.separation_m, scenario.vertical_separation_m),
+    )
+
+
+class _Script:
+    """What the scenario does to its drones as simulated time passes: take-offs (a drone
+    about to take off waits for its comparisons when the scenario says so), pauses, a
+    companion that vanishes; and the companions' events told as progress lines."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        vehicles: dict[int, ReplayVehicle],
+        companions: dict[int, Companion],
+        vanished: dict[int, Companion],
+        say: Callable[[str], None],
+    ) -> None:
+        self.scenario, self.vehicles, self.say = scenario, vehicles, say
+        self.companions, self.vanished = companions, vanished
+        self.started: set[int] = set()
+        self.paused: dict[int, bool] = {}  # held by the scenario (False), and flying on (True)
+        self.told = {d.id: 0 for d in scenario.drones}  # companion events already told
+
+    async def fly(self, clock: Clock, origin: float, *, virtual: bool) -> bool:
+        """Until every mission is flown (True) or the scenario's time limit."""
+        while True:
+            sim = clock.now() - origin
+            await self.step(sim)
+            flying = any(v.flying for v in self.vehicles.values())
+            done = len(self.started) == len(self.vehicles) and not flying
+            if done or sim >= self.scenario.time_limit_s:
+                self.say(f"t={sim:.0f} s: {'all missions flown' if done else 'time limit'}")
+                return done
+            if virtual:
+                await clock.sleep(VIRTUAL_LOOK_S)
+            else:
+                await asyncio.sleep(0.01)
+
+    async def step(self, sim: float) -> None:
+        for ident, companion in self.companions.items():
+            for event in companion.events[self.told[ident] :]:
+                if event.kind in TOLD:
+                    self.say(f"t={event.t:.0f} s: drone {ident}: {_story(event)}")
+            self.told[ident] = len(companion.events)
+        for d in self.scenario.drones:
+            await self._vanish(d, sim)
+            await self._pause(d, sim)
+            waiting = (
+                d.hold_for_comparisons
+                and d.id in self.companions
+                and self.companions[d.id].comparing
+            )
+            if d.id not in self.started and sim >= d.takeoff_delay_s and not waiting:
+                await self.vehicles[d.id].take_off()
+                self.started.add(d.id)
+                self.say(f"t={sim:.0f} s: drone {d.id} takes off")
+
+    async def _vanish(self, d: DroneSpec, sim: float) -> None:
+        gone = self.companions.get(d.id)
+        due = d.companion_stop_s is not None and sim >= d.companion_stop_s
+        if due and gone and (gone.in_run or not d.companion_stop_in_run):
+            await gone.stop()  # the peer vanishes: its radio goes silent
+            self.vanished[d.id] = self.companions.pop(d.id)
+            self.say(f"t={sim:.0f} s: drone {d.id}'s companion vanishes")
+
+    async def _pause(self, d: DroneSpec, sim: float) -> None:
+        if d.pause is None:
+            return
+        if d.id in self.started and d.id not in self.paused and sim >= d.pause[0]:
+            await self.vehicles[d.id].pause()
+            self.paused[d.id] = False
+            self.say(f"t={sim:.0f} s: drone {d.id} is held for {d.pause[1]:.0f} s")
+        elif self.paused.get(d.id) is False and sim >= d.pause[0] + d.pause[1]:
+            await self.vehicles[d.id].resume()
+            self.paused[d.id] = True
+            self.say(f"t={sim:.0f} s: drone {d.id} flies on")
+
+
+def _check(scenario: Scenario, px4: Px4Build | None, *, virtual: bool) -> None:
+    """What a virtual replay cannot fly: PX4 SITL (lock-step real time), MAVLink faults."""
+    if virtual and px4 is not None:
+        raise ScenarioError("PX4 SITL runs in real time: no virtual replay with it")
+    if virtual and not isinstance(asyncio.get_running_loop(), VirtualTimeLoop):
+        raise RuntimeError("a virtual replay runs on a VirtualTimeLoop (run_virtual)")
+    faulty = [d.id for d in scenario.drones if d.faults != Faults()]
+    if virtual and faulty:
+        raise ScenarioError(f"drones {faulty}: MAVLink faults need the replay over MAVSDK")
+
+
+async def _autopilot(vehicle: ReplayVehicle, d: DroneSpec) -> AutopilotBase:
+    """The companion's autopilot: the in-process one, or MAVSDK on the vehicle's API link."""
+    if isinstance(vehicle, InProcessVehicle):
+        return vehicle.autopilot
+    return await Autopilot.connect(vehicle.api_url, personality=personality(d.ardupilot))
+
+
+async def _shut_down(
+    companions: dict[int, Companion],
+    autopilots: list[AutopilotBase],
+    vehicles: dict[int, ReplayVehicle],
+    say: Callable[[str], None],
+) -> dict[int, list[MissionItem]]:
+    """Stop the companions, MAVSDK and the vehicles; the mission each vehicle held at the end
+    (read after MAVSDK is off the vehicle; empty when it cannot be read)."""
+    for companion in companions.values():
+        await companion.stop()
+    for ap in autopilots:
+        await ap.close()
+    held: dict[int, list[MissionItem]] = {}
+    for k, vehicle in vehicles.items():
+        try:
+            held[k] = await vehicle.held_mission()
+        except Exception as exc:  # the report says "other", the log says why
+            log.warning("drone %d: the mission held at the end is unknown: %s", k, exc)
+            held[k] = []
+    for vehicle in vehicles.values():
+        await vehicle.stop()
+    return held
+
+
 async def run_replay(
     scenario: Scenario,
     *,
@@ -182,13 +352,7 @@ async def run_replay(
     ``px4_speed_max``), or -- ``virtual`` -- mock vehicles in this process
     (:mod:`companion.sim.inproc`) on a virtual clock (run it on a
     :class:`~companion.radio.clock.VirtualTimeLoop`: :func:`run_virtual`)."""
-    if virtual and px4 is not None:
-        raise ScenarioError("PX4 SITL runs in real time: no virtual replay with it")
-    if virtual and not isinstance(asyncio.get_running_loop(), VirtualTimeLoop):
-        raise RuntimeError("a virtual replay runs on a VirtualTimeLoop (run_virtual)")
-    faulty = [d.id for d in scenario.drones if d.faults != Faults()]
-    if virtual and faulty:
-        raise ScenarioError(f"drones {faulty}: MAVLink faults need the replay over MAVSDK")
+    _check(scenario, px4, virtual=virtual)
     ts = scenario.time_scale if px4 is None else min(scenario.time_scale, px4_speed_max)
     # Mocks fly on a clock paced by this process (a busy machine does not pass as flight
     # time); PX4 SITL keeps lock-step real time, so with it the plain scaled clock; a virtual
@@ -222,57 +386,12 @@ async def run_replay(
     ticker = spawn(paced.tick(), name="paced-clock", log=log) if paced is not None else None
     try:
         for d in scenario.drones:
-            vehicle: ReplayVehicle
-            if virtual:
-                vehicle = InProcessVehicle(
-                    d.mission, d.home, ardupilot=d.ardupilot, flight=flight, clock=clock
-                )
-            elif px4 is None:
-                vehicle = MockVehicle(
-                    d.mission,
-                    d.home,
-                    ardupilot=d.ardupilot,
-                    flight=flight,
-                    faults=d.faults,
-                    bind_port=free_udp_port(),
-                    send_port=free_udp_port(),
-                    clock=clock,
-                )
-            else:
-                if d.ardupilot:
-                    raise ScenarioError(f"drone {d.id}: PX4 SITL cannot fly an ArduPilot drone")
-                vehicle = Px4SitlVehicle(
-                    px4,
-                    d.mission,
-                    d.home,
-                    speed_factor=ts,
-                    cruise_m_s=scenario.cruise_m_s,
-                    clock=clock,
-                )
+            vehicle = _vehicle(d, scenario, px4, ts, flight, clock, virtual=virtual)
             mocks[d.id] = vehicle
             await vehicle.start(origin)
-            ap: AutopilotBase
-            if isinstance(vehicle, InProcessVehicle):
-                ap = vehicle.autopilot
-            else:
-                ap = await Autopilot.connect(vehicle.api_url, personality=personality(d.ardupilot))
+            ap = await _autopilot(vehicle, d)
             autopilots.append(ap)
-            settings = CompanionSettings(
-                node=d.id,
-                autopilot_url=vehicle.api_url,
-                ardupilot=d.ardupilot,
-                offset=OffsetSettings(offset_m=scenario.offset_m),
-                beacon_interval_s=scenario.beacon_interval_s,
-                grid_radius_m=scenario.grid_radius_m,
-                grid_resolution_mm=scenario.grid_resolution_mm,
-                lookahead_s=scenario.lookahead_s,
-                run_timeout_s=None,  # a scenario's runs end by its own time limit
-                cruise_m_s=scenario.cruise_m_s,
-                failsafe=FailsafeSettings(action=scenario.failsafe),
-                separation=SeparationSettings(
-                    scenario.separation_m, scenario.vertical_separation_m
-                ),
-            )
+            settings = _settings(d, scenario, vehicle.api_url)
             endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
             companions[d.id] = Companion(settings, endpoint, ap, fleet[d.id])
             via = "MAVSDK" if isinstance(ap, Autopilot) else "no MAVLink"
@@ -286,63 +405,10 @@ async def run_replay(
             mock.restart_clock(origin)
         for companion in companions.values():
             companion.epoch = clock.now()
-        started: set[int] = set()
-        paused: dict[int, bool] = {}  # held by the scenario (False), and flying on (True)
-        told = {d.id: 0 for d in scenario.drones}  # companion events already told
-        while True:
-            sim = clock.now() - origin
-            for ident, companion in companions.items():
-                for event in companion.events[told[ident] :]:
-                    if event.kind in TOLD:
-                        say(f"t={event.t:.0f} s: drone {ident}: {_story(event)}")
-                told[ident] = len(companion.events)
-            for d in scenario.drones:
-                gone = companions.get(d.id)
-                due = d.companion_stop_s is not None and sim >= d.companion_stop_s
-                if due and gone and (gone.in_run or not d.companion_stop_in_run):
-                    await gone.stop()  # the peer vanishes: its radio goes silent
-                    vanished[d.id] = companions.pop(d.id)
-                    say(f"t={sim:.0f} s: drone {d.id}'s companion vanishes")
-                waiting = (
-                    d.hold_for_comparisons and d.id in companions and companions[d.id].comparing
-                )
-                if d.pause is not None and d.id in started and d.id not in paused:
-                    if sim >= d.pause[0]:
-                        await mocks[d.id].pause()
-                        paused[d.id] = False
-                        say(f"t={sim:.0f} s: drone {d.id} is held for {d.pause[1]:.0f} s")
-                elif d.pause is not None and paused.get(d.id) is False:
-                    if sim >= d.pause[0] + d.pause[1]:
-                        await mocks[d.id].resume()
-                        paused[d.id] = True
-                        say(f"t={sim:.0f} s: drone {d.id} flies on")
-                if d.id not in started and sim >= d.takeoff_delay_s and not waiting:
-                    # a drone about to take off waits for its comparison to finish
-                    await mocks[d.id].take_off()
-                    started.add(d.id)
-                    say(f"t={sim:.0f} s: drone {d.id} takes off")
-            done = len(started) == len(mocks) and not any(m.flying for m in mocks.values())
-            if done or sim >= scenario.time_limit_s:
-                break
-            if virtual:
-                await clock.sleep(VIRTUAL_LOOK_S)
-            else:
-                await asyncio.sleep(0.01)
-        say(f"t={sim:.0f} s: {'all missions flown' if done else 'time limit'}")
+        script = _Script(scenario, mocks, companions, vanished, say)
+        done = await script.fly(clock, origin, virtual=virtual)
     finally:
-        for companion in companions.values():
-            await companion.stop()
-        for ap in autopilots:  # MAVSDK off the vehicle before the harness reads its mission
-            await ap.close()
-        held = {}
-        for k, vehicle in mocks.items():
-            try:
-                held[k] = await vehicle.held_mission()
-            except Exception as exc:  # the report says "other", the log says why
-                log.warning("drone %d: the mission held at the end is unknown: %s", k, exc)
-                held[k] = []
-        for vehicle in mocks.values():
-            await vehicle.stop()
+        held = await _shut_down(companions, autopilots, mocks, say)
         if paced is not None and ticker is not None:
             ticker.cancel()
             with contextlib.suppress(asyncio.CancelledError):
