@@ -26,7 +26,7 @@ from companion.neighbours.beacon import keys_hash
 from companion.neighbours.peers import Peer, distance_m, near_cut, segment_distance_m, time_to_meet
 from companion.neighbours.registry import Neighbour
 from companion.runs.budget import ALICE, MAX_RUN_WORK, BudgetExceeded, run_work
-from companion.runs.exchange import PeerRefused, run_alice
+from companion.runs.exchange import PeerRefused, RunReport, run_alice
 from companion.runs.failsafe import too_late
 from companion.runs.progress import RunProgress
 from companion.runs.roles import Phase, Role
@@ -38,6 +38,7 @@ from protocol.geo.volumes import CROSSING, VolumeSpec
 from protocol.geo.volumes import Route as PathRoute
 from protocol.intersection import Alice
 from protocol.messages import Suite
+from protocol.ot.setup import HolderSetup
 from protocol.run import DEFAULT_LIMITS, MAX_SEGMENTS
 
 log = logging.getLogger("companion")
@@ -377,42 +378,10 @@ class AliceRuns(Edits):
             setup = self.holder_setups.get(peer.node)
             if phase is Phase.NEAR:
                 horizon = self._bob_horizon(asked, start, path, peer, grid, fresh=setup is None)
-            try:
-                route, volumes = self._own_route(grid, start, path)
-                alice = Alice(
-                    route,
-                    grid,
-                    suite=self.settings.suite,
-                    setup=setup,
-                    horizon_m=horizon,
-                    volumes=volumes,
-                    ot_security=self.settings.ot_security,
-                    trusted_keys=neighbour.operator.paper_keys,
-                )
-            except ProtocolError as exc:
-                self.record(
-                    EventKind.RUN_FAILED, PeerFailure(peer=peer.node, phase=phase, error=str(exc))
-                )
+            began = await self._begin(peer, phase, horizon, start, path, neighbour, grid, setup)
+            if began is None:
                 return False
-            # Bob's size is unknown until his first reply: act at once only if even the
-            # smallest Bob makes the result too late; the watch re-checks with his real size.
-            needed = self._seconds(alice.m, grid, fresh=setup is None, n=1)
-            meet = self._urgency(peer)
-            self.record(
-                EventKind.RUN_STARTED,
-                RunStarted(
-                    peer=peer.node,
-                    phase=phase,
-                    segments=alice.m,
-                    first_segment=start,
-                    estimate_s=round(needed, 1),
-                    time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
-                ),
-            )
-            if phase is Phase.NEAR:
-                peer.near_run = (self.clock.now(), horizon)
-            if too_late(needed, meet, self.settings.failsafe):
-                await self._precaution(peer, needed, meet)
+            alice, needed = began
             watchdog = self._spawn(self._watch(peer, alice, grid, needed), "watch")
             self._sessions += 1
             self._own_on_air = alice
@@ -444,56 +413,11 @@ class AliceRuns(Edits):
                         alive=functools.partial(self._still_heard, peer.node),
                     )
             except PeerRefused as exc:
-                if exc.code is Refusal.UNKNOWN_SETUP and attempt == 0:
-                    self.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
-                    self.record(EventKind.SETUP_RENEWED, PeerNote(peer=peer.node))
-                    continue
-                if exc.code is Refusal.ROLE:
-                    peer.role = Role.BOB  # the peer already resolved this pair as Alice
-                    self.record(
-                        EventKind.YIELDED, PeerNote(peer=peer.node, reason="the peer is Alice")
-                    )
-                    return False
-                if exc.code is Refusal.BUSY:
-                    # Its own run is on the air: not a failure, ask again soon (at a random
-                    # moment: others it refused are waiting too).
-                    low, high = self.settings.busy_retry_s
-                    peer.retry_in = low + (high - low) * secrets.randbelow(1001) / 1000
-                    peer.busy = True
-                    self.record(EventKind.PEER_BUSY, PeerNote(peer=peer.node, phase=phase))
-                    return False
-                if exc.code is Refusal.UNKNOWN_PEER:
-                    self.sender.send_certificate()  # it lacks our certificate: beacon it
-                box = exc.code is Refusal.BOX  # off our beacons, or beyond its limits
-                self.record(
-                    EventKind.RUN_FAILED,
-                    PeerFailure(
-                        peer=peer.node,
-                        phase=phase,
-                        refused=exc.code.name,
-                        box_radius_m=grid.radius_m if box else None,  # the box we asked for
-                        resolution_mm=grid.resolution_mm if box else None,
-                    ),
-                )
-                return False
-            except AuthenticationError as exc:
-                self.record(
-                    EventKind.RUN_FAILED, PeerFailure(peer=peer.node, phase=phase, auth=str(exc))
-                )
-                return False
-            except ConsistencyError as exc:
-                # The peer's OT extension is not the honest one: it probed our Delta.  Drop
-                # the setup (a wrong guess must not be followed by another on the same Delta).
-                self.holder_setups.pop(peer.node, None)
-                self.record(
-                    EventKind.RUN_FAILED,
-                    PeerFailure(peer=peer.node, phase=phase, deviated=str(exc)),
-                )
+                if self._refused(peer, phase, exc, grid, first=attempt == 0):
+                    continue  # the peer lost our setup: a fresh one
                 return False
             except (ProtocolError, CompanionError) as exc:
-                self.record(
-                    EventKind.RUN_FAILED, PeerFailure(peer=peer.node, phase=phase, error=str(exc))
-                )
+                self._failed(peer, phase, exc)
                 return False
             finally:
                 self._sessions -= 1
@@ -505,6 +429,119 @@ class AliceRuns(Edits):
             break
         else:
             return False
+        await self._accept(peer, phase, start, path, alice, report)
+        return True
+
+    async def _begin(
+        self,
+        peer: Peer,
+        phase: Phase,
+        horizon: int,
+        start: int,
+        path: list[tuple[int, int]],
+        neighbour: Neighbour,
+        grid: GridSpec,
+        setup: HolderSetup | None,
+    ) -> tuple[Alice, float] | None:
+        """Our machine for the run and the seconds it should take (None: our path cannot be
+        compared on this grid, recorded); a precaution at once if even the smallest Bob
+        makes the result too late (the watch re-checks with his real size)."""
+        try:
+            route, volumes = self._own_route(grid, start, path)
+            alice = Alice(
+                route,
+                grid,
+                suite=self.settings.suite,
+                setup=setup,
+                horizon_m=horizon,
+                volumes=volumes,
+                ot_security=self.settings.ot_security,
+                trusted_keys=neighbour.operator.paper_keys,
+            )
+        except ProtocolError as exc:
+            self.record(
+                EventKind.RUN_FAILED, PeerFailure(peer=peer.node, phase=phase, error=str(exc))
+            )
+            return None
+        needed = self._seconds(alice.m, grid, fresh=setup is None, n=1)
+        meet = self._urgency(peer)
+        self.record(
+            EventKind.RUN_STARTED,
+            RunStarted(
+                peer=peer.node,
+                phase=phase,
+                segments=alice.m,
+                first_segment=start,
+                estimate_s=round(needed, 1),
+                time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
+            ),
+        )
+        if phase is Phase.NEAR:
+            peer.near_run = (self.clock.now(), horizon)
+        if too_late(needed, meet, self.settings.failsafe):
+            await self._precaution(peer, needed, meet)
+        return alice, needed
+
+    def _failed(self, peer: Peer, phase: Phase, exc: ProtocolError | CompanionError) -> None:
+        """A run that ended without a result, recorded by what ended it."""
+        if isinstance(exc, AuthenticationError):
+            failure = PeerFailure(peer=peer.node, phase=phase, auth=str(exc))
+        elif isinstance(exc, ConsistencyError):
+            # The peer's OT extension is not the honest one: it probed our Delta.  Drop the
+            # setup (a wrong guess must not be followed by another on the same Delta).
+            self.holder_setups.pop(peer.node, None)
+            failure = PeerFailure(peer=peer.node, phase=phase, deviated=str(exc))
+        else:
+            failure = PeerFailure(peer=peer.node, phase=phase, error=str(exc))
+        self.record(EventKind.RUN_FAILED, failure)
+
+    def _refused(
+        self, peer: Peer, phase: Phase, exc: PeerRefused, grid: GridSpec, *, first: bool
+    ) -> bool:
+        """The peer refused our run before any work: True to run again at once (it lost our
+        OT setup: a fresh one), else what the refusal means is recorded."""
+        if exc.code is Refusal.UNKNOWN_SETUP and first:
+            self.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
+            self.record(EventKind.SETUP_RENEWED, PeerNote(peer=peer.node))
+            return True
+        if exc.code is Refusal.ROLE:
+            peer.role = Role.BOB  # the peer already resolved this pair as Alice
+            self.record(EventKind.YIELDED, PeerNote(peer=peer.node, reason="the peer is Alice"))
+            return False
+        if exc.code is Refusal.BUSY:
+            # Its own run is on the air: not a failure, ask again soon (at a random moment:
+            # others it refused are waiting too).
+            low, high = self.settings.busy_retry_s
+            peer.retry_in = low + (high - low) * secrets.randbelow(1001) / 1000
+            peer.busy = True
+            self.record(EventKind.PEER_BUSY, PeerNote(peer=peer.node, phase=phase))
+            return False
+        if exc.code is Refusal.UNKNOWN_PEER:
+            self.sender.send_certificate()  # it lacks our certificate: beacon it
+        box = exc.code is Refusal.BOX  # off our beacons, or beyond its limits
+        self.record(
+            EventKind.RUN_FAILED,
+            PeerFailure(
+                peer=peer.node,
+                phase=phase,
+                refused=exc.code.name,
+                box_radius_m=grid.radius_m if box else None,  # the box we asked for
+                resolution_mm=grid.resolution_mm if box else None,
+            ),
+        )
+        return False
+
+    async def _accept(
+        self,
+        peer: Peer,
+        phase: Phase,
+        start: int,
+        path: list[tuple[int, int]],
+        alice: Alice,
+        report: RunReport,
+    ) -> None:
+        """A run's result: keep the OT setup, note what it covered and flagged, release a
+        precaution it settles, and plan the edit again."""
         if alice.setup is not None:
             self.holder_setups[peer.node] = alice.setup
         flagged = {start + j for j, hit in enumerate(report.hits) if hit}
@@ -530,7 +567,6 @@ class AliceRuns(Edits):
         if phase is Phase.FULL or covered >= self.precaution.get(peer.node, set()):
             await self._release(peer)
         await self._replan(f"result of the {phase} run with {peer.node}")
-        return True
 
     def _own_route(
         self, grid: GridSpec, start: int, path: list[tuple[int, int]]
