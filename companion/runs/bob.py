@@ -199,36 +199,10 @@ class BobAnswers(CompanionCore):
             self.endpoint.abort(peer, session, AbortCode.PROTOCOL, proof)
             self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=str(exc)))
             return None
-        if known.role is Role.ALICE:
-            if self.settings.node < peer:
-                # Both took the pair as Alice (their views of who was on the ground crossed):
-                # exactly one of a pair adjusts -- the lower node id keeps the role.
-                await self._refuse(peer, session, responder, Refusal.ROLE)
-                return None
-            self.record(
-                EventKind.YIELDED, PeerNote(peer=peer, reason="the peer has the lower node id")
-            )
-        own = self._own_on_air
-        if (own is not None and own.n is None) or self._answers_waiting:
-            # Our own run holds the radio and still waits for its peer's first reply (a
-            # third drone, perhaps busy itself), or another answer already waits for the
-            # radio: a request kept waiting would keep its sender's radio idle too, a chain
-            # of drones each waiting on the next (radio.py).  Otherwise it waits: at most
-            # one answer behind a run that is under way.
-            await self._refuse(peer, session, responder, Refusal.BUSY)
-            return None
         operator = neighbour.operator
-        allowed = min(operator.max_segments, 1 << min(known.beacon.size_class, MAX_SIZE_CLASS))
-        if hello.m > allowed:  # more than its beacon announced or its operator allows
-            await self._refuse(peer, session, responder, Refusal.SIZE)
-            return None
-        if run_work(hello.m, self._own_size(), hello.grid.range) > MAX_RUN_WORK:
-            # More than a fair run (m x n x grid bits): Bob's CPU, memory and first reply
-            # grow with it, and a refused run costs the asker nothing.
-            await self._refuse(peer, session, responder, Refusal.SIZE)
-            return None
-        if not self._plausible_box(hello, known):
-            await self._refuse(peer, session, responder, Refusal.BOX)
+        code = self._refusal(peer, hello, known, operator.max_segments)
+        if code is not None:
+            await self._refuse(peer, session, responder, code)
             return None
         try:
             ticket = self.ledger.admit(
@@ -247,6 +221,37 @@ class BobAnswers(CompanionCore):
         known.role = Role.BOB
         known.conflicts.clear()  # as Bob we do not adjust for this peer
         return responder, hello, ticket
+
+    def _refusal(self, peer: int, hello: Hello, known: Peer, max_segments: int) -> Refusal | None:
+        """The checks on an authenticated request before any work, cheapest first: the role,
+        a radio that is not free, the size (its beacon's, its operator's limit, a fair run's
+        work) and the box; the refusal, or None to go on."""
+        if known.role is Role.ALICE:
+            if self.settings.node < peer:
+                # Both took the pair as Alice (their views of who was on the ground crossed):
+                # exactly one of a pair adjusts -- the lower node id keeps the role.
+                return Refusal.ROLE
+            self.record(
+                EventKind.YIELDED, PeerNote(peer=peer, reason="the peer has the lower node id")
+            )
+        own = self._own_on_air
+        if (own is not None and own.n is None) or self._answers_waiting:
+            # Our own run holds the radio and still waits for its peer's first reply (a
+            # third drone, perhaps busy itself), or another answer already waits for the
+            # radio: a request kept waiting would keep its sender's radio idle too, a chain
+            # of drones each waiting on the next (companion.runs.turns).  Otherwise it waits: at
+            # most one answer behind a run that is under way.
+            return Refusal.BUSY
+        allowed = min(max_segments, 1 << min(known.beacon.size_class, MAX_SIZE_CLASS))
+        if hello.m > allowed:  # more than its beacon announced or its operator allows
+            return Refusal.SIZE
+        if run_work(hello.m, self._own_size(), hello.grid.range) > MAX_RUN_WORK:
+            # More than a fair run (m x n x grid bits): Bob's CPU, memory and first reply
+            # grow with it, and a refused run costs the asker nothing.
+            return Refusal.SIZE
+        if not self._plausible_box(hello, known):
+            return Refusal.BOX
+        return None
 
     def _plausible_box(self, hello: Hello, known: Peer) -> bool:
         """Alice's grid is centred where she is (her position when the run starts): within
