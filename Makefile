@@ -30,7 +30,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff format --check protocol companion tests scripts
 
 typecheck: $(STAMP)
-	$(VENV)/bin/mypy --strict protocol companion tests
+	$(VENV)/bin/mypy --strict protocol companion tests scripts
 
 # Two workers: the real-time tests (replays, PX4 SITL; xdist_group "realtime") run one at a
 # time on one of them, everything else shares the other.

@@ -12,6 +12,7 @@ project's one Earth model (:func:`protocol.geo.geodesy.moved`).  Run from the re
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 from companion.mission.files import format_plan
@@ -37,7 +38,7 @@ def at(p: Point) -> tuple[float, float]:
 
 
 def mission(
-    name: str, legs: list[Point], alt: float = 30.0, loiter: dict[int, float] | None = None
+    name: str, legs: Sequence[Point], alt: float = 30.0, loiter: dict[int, float] | None = None
 ) -> None:
     """Take-off over the first point to ``alt``, waypoints through ``legs`` (a loiter of the
     given seconds at the leg indices in ``loiter``), a landing 20 m past the last."""
