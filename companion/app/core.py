@@ -170,7 +170,7 @@ class CompanionCore:
         self.boot = secrets.token_bytes(BOOT_SIZE)  # new at every start: peers drop our setups
         self.beacon_keys = BeaconKeys()  # new at every start too
         public = self.bob_keys.public_bytes() if self.bob_keys is not None else b""
-        self.keys_hash = keys_hash(self.boot, self.beacon_keys.public, public)
+        announced = keys_hash(self.boot, self.beacon_keys.public, public)  # (signed beacons)
         self.store = StateStore(credentials.state_dir)
         self.neighbours = Neighbours(
             credentials.trust,
@@ -188,13 +188,13 @@ class CompanionCore:
                 settings.max_answer_bits_per_peer,
             ),
         )
-        self.cadence = Cadence.of(endpoint, settings.beacon_interval_s)
+        self.cadence = Cadence.of(endpoint.profile, settings.beacon_interval_s)
         self.sender = BeaconSender(
             settings.node,
             endpoint,
             self.identity,
             self.beacon_keys,
-            self.keys_hash,
+            announced,
             self.store,
             self.neighbours,
             self.cadence,

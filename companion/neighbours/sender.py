@@ -26,6 +26,7 @@ from companion.neighbours.beacon import Beacon, BeaconKind, CertBeacon, size_cla
 from companion.neighbours.beacon_airtime import beacon_interval
 from companion.neighbours.peers import FRESH_S
 from companion.neighbours.registry import Neighbours
+from companion.radio.airtime import LinkProfile
 from companion.radio.arq import LinkError
 from companion.radio.endpoint import LinkEndpoint
 from protocol.messages import Suite
@@ -56,8 +57,8 @@ class Cadence:
     silence_s: float
 
     @classmethod
-    def of(cls, endpoint: LinkEndpoint, configured_s: float) -> Cadence:
-        interval = beacon_interval(endpoint.profile, configured_s)
+    def of(cls, profile: LinkProfile, configured_s: float) -> Cadence:
+        interval = beacon_interval(profile, configured_s)
         return cls(
             interval,
             max(SIGNED_EVERY_S, SIGNED_EVERY * interval),

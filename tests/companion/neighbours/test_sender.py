@@ -7,14 +7,12 @@ import pytest
 from companion.neighbours.beacon_airtime import beacon_interval
 from companion.neighbours.peers import FRESH_S
 from companion.neighbours.sender import Cadence
-from companion.radio import PROFILES, LinkEndpoint
-from companion.sim.medium import SimMedium
+from companion.radio import PROFILES
 
 
 @pytest.mark.parametrize("name", ["us915-sf7", "eu868-sf7", "eu868-sf9"])
 def test_cadence_follows_the_profile_and_the_configured_interval(name: str) -> None:
-    endpoint = LinkEndpoint(1, SimMedium().attach(1), PROFILES[name])
-    cadence = Cadence.of(endpoint, 10.0)
+    cadence = Cadence.of(PROFILES[name], 10.0)
     interval = beacon_interval(PROFILES[name], 10.0)
     assert cadence.interval_s == interval >= 10.0  # stretched under a duty cycle
     assert cadence.signed_every_s == max(300.0, 30 * interval)
