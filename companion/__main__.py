@@ -62,7 +62,7 @@ def _mavlink_message(text: str) -> str:
 
 
 def _log_flags(parser: argparse.ArgumentParser, level_help: str) -> None:
-    """--log-level and --log-json (:mod:`companion.app.logs`)."""
+    """--log-level and --log-json (:mod:`companion.logs`)."""
     parser.add_argument(
         "--log-level", choices=["debug", "info", "warning", "error"], help=level_help
     )

@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 from enum import StrEnum
 from typing import Any
 
-from companion.runs.roles import Phase
+from companion.roles import Phase
 
 
 class EventKind(StrEnum):

@@ -4,7 +4,10 @@
   layers (no cycle between them, no import inside a function to dodge one).
 - The companion's product imports nothing simulated and nothing from the command line or the
   protocol's tools; the simulation does not import the command line.
-- The radio and the credentials are the companion's bottom layers.
+- The radio and the credentials are the companion's bottom layers; its subpackages form
+  layers too (radio, auth < mission < neighbours < runs < app < sim < cli).
+- No product module reaches into another module's private attributes: components are used
+  through their interfaces.
 - No module of either package is part of an import cycle.
 """
 
@@ -160,6 +163,69 @@ def test_the_protocols_subpackages_are_layers() -> None:
                 if d.startswith("protocol.") and package(d) != package(name)
             )
     assert _cycles(packages) == []
+
+
+def test_the_companions_subpackages_are_layers() -> None:
+    """radio, auth < mission < neighbours < runs < app < sim < cli: a subpackage imports only
+    from those below it (and the shared top-level modules: errors, events, roles, tasks,
+    logs, state, settings, context) -- the components of one companion are wired by the app,
+    not by each other's packages."""
+    order = ("radio", "auth", "mission", "neighbours", "runs", "app", "sim", "cli")
+    rank = {f"companion.{p}": i for i, p in enumerate(order)}
+    rank["companion.auth"] = rank["companion.radio"]  # (side by side at the bottom)
+    bad = []
+    for name, deps in _graph().items():
+        here = ".".join(name.split(".")[:2])
+        if here not in rank:
+            continue
+        for d in sorted(deps):
+            there = ".".join(d.split(".")[:2])
+            if there in rank and there != here and rank[there] >= rank[here]:
+                bad.append(f"{name} imports {d}")
+    assert bad == []
+
+
+def _private_reaches(path: Path) -> list[str]:
+    """``x._name`` in ``path`` where ``x`` is not ``self``/``cls`` and nothing in the module
+    defines ``_name`` (a class reading its own kind's privates is fine)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    own: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            own.add(node.name)
+        elif isinstance(node, ast.Name):
+            own.add(node.id)
+        elif (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id in ("self", "cls")
+        ):
+            own.add(node.attr)
+    return [
+        f"{path.name}:{node.lineno} {ast.unparse(node)}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute)
+        and node.attr.startswith("_")
+        and not node.attr.endswith("_")
+        and node.attr not in own
+        and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"))
+        and not ast.unparse(node).startswith("argparse.")
+    ]
+
+
+def test_no_product_module_reaches_into_anothers_privates() -> None:
+    bad = []
+    for name, path in _modules().items():
+        if name.startswith(("companion.sim", *COMMAND_LINE, "protocol.tools")):
+            continue
+        bad += _private_reaches(path)
+    assert bad == []
+
+
+def test_the_private_check_sees_a_reach(tmp_path: Path) -> None:
+    probe = tmp_path / "probe.py"
+    probe.write_text("class A:\n    def f(self, b):\n        return b._x, self._y\n")
+    assert _private_reaches(probe) == ["probe.py:3 b._x"]
 
 
 def test_no_module_of_ours_is_imported_inside_a_function() -> None:

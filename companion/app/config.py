@@ -66,7 +66,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from companion.app.runtime import CompanionSettings, Credentials
 from companion.app.tables import Table, TableError, load_toml
 from companion.auth.certificate import Certificate, CertificateError
 from companion.auth.keys import KeyFileError, PublicKey, read_private_key, read_public_key
@@ -77,6 +76,7 @@ from companion.mission.planner import OffsetSettings
 from companion.mission.schedule import SeparationSettings, Tolerance
 from companion.radio.airtime import PROFILES
 from companion.runs.failsafe import Action, FailsafeSettings
+from companion.settings import CompanionSettings, Credentials
 from protocol.messages import Suite
 from protocol.ot.setup import SECURITY_LEVELS
 from protocol.run import MAX_SEGMENTS

@@ -10,13 +10,18 @@ import contextlib
 import json
 import signal
 import sys
+from typing import TYPE_CHECKING, Any
 
-from companion.app import logs
+from companion import logs
 from companion.radio import Clock
 from companion.radio.airtime import PHY_MAX_FRAME
 from companion.sim.medium import Channel, Impairments
 from companion.sim.udp_hub import UdpHub
 from protocol.tools import cli
+
+if TYPE_CHECKING:
+    from companion.app.config import LinkSettings
+    from companion.radio.transport import Transport
 
 DEFAULT_HOME = (47.397742, 8.545594, 488.0)  # PX4 SITL's default home
 
@@ -143,6 +148,34 @@ def mission_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``run`` options as configuration overrides (dotted keys)."""
+    return {
+        "node": args.node,
+        "autopilot": args.autopilot,
+        "log_level": args.log_level,
+        "link.transport": args.transport,
+        "link.profile": args.profile,
+        "link.hub": args.hub,
+        "link.serial": args.serial,
+        "offset.offset_m": args.offset,
+        "offset.max_altitude_m": args.max_altitude,
+        "separation.horizontal_m": args.separation,
+        "separation.vertical_m": args.vertical_separation,
+    }
+
+
+async def _open_transport(node: int, link: LinkSettings) -> Transport:
+    """The companion's radio: a serial port, or the UDP link hub."""
+    if link.transport == "serial":
+        from companion.radio.serial_port import SerialTransport
+
+        return SerialTransport.open(link.serial, link.baudrate)
+    from companion.radio.udp import UdpTransport
+
+    return await UdpTransport.connect(node, link.hub)
+
+
 async def run(args: argparse.Namespace) -> int:
     import logging
 
@@ -151,24 +184,8 @@ async def run(args: argparse.Namespace) -> int:
     from companion.mission.autopilot import Autopilot
     from companion.mission.personalities import personality
     from companion.radio import LinkEndpoint, profile
-    from companion.radio.transport import Transport
 
-    config = load_config(
-        args.config,
-        {
-            "node": args.node,
-            "autopilot": args.autopilot,
-            "log_level": args.log_level,
-            "link.transport": args.transport,
-            "link.profile": args.profile,
-            "link.hub": args.hub,
-            "link.serial": args.serial,
-            "offset.offset_m": args.offset,
-            "offset.max_altitude_m": args.max_altitude,
-            "separation.horizontal_m": args.separation,
-            "separation.vertical_m": args.vertical_separation,
-        },
-    )
+    config = load_config(args.config, _run_overrides(args))
     logs.setup(config.log_level, args.log_json, mavsdk=True)
     log = logging.getLogger("companion")
     settings, link = config.companion, config.link
@@ -177,15 +194,7 @@ async def run(args: argparse.Namespace) -> int:
             "the companion needs an identity: [identity] key, certificate and [[trust.operator]] "
             "in --config (python -m companion keys init|certify)"
         )
-    transport: Transport
-    if link.transport == "serial":
-        from companion.radio.serial_port import SerialTransport
-
-        transport = SerialTransport.open(link.serial, link.baudrate)
-    else:
-        from companion.radio.udp import UdpTransport
-
-        transport = await UdpTransport.connect(settings.node, link.hub)
+    transport = await _open_transport(settings.node, link)
     endpoint = LinkEndpoint(settings.node, transport, profile(link.profile))
     log.info("node %d: connecting to the autopilot at %s", settings.node, settings.autopilot_url)
     try:

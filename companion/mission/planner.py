@@ -158,12 +158,7 @@ def plan_edit(
     out = plan_offsets(items, raises, settings, path=path)
     origin = tuple(range(len(out)))
     if vehicle.segment is None:  # on the ground: the launch leg starts at the take-off height
-        for k, delta in raises.items():
-            for index in path.vertices[k].items:
-                if items[index].command == NAV_TAKEOFF and index < len(out):
-                    lifted = _raised(items[index], delta, settings, index)
-                    if abs(lifted.z - items[index].z) > abs(out[index].z - items[index].z):
-                        out[index] = lifted
+        _raise_takeoff(items, out, raises, settings, path)
         return Edit(out, origin)
     k = vehicle.segment
     if k not in raises:
@@ -178,6 +173,34 @@ def plan_edit(
     raised = out[before].z if before in path.items_of(k) else target.z + raises[k]
     if abs(here - raised) <= 1.0 or (raises[k] > 0) != (raised > here):
         return Edit(out, origin)  # at (or past) the raised altitude already
+    waypoint = _climb_waypoint(vehicle, target, frame, here, raised)
+    waypoint = _raised(waypoint, raised - here, settings, before)
+    edited = _inserted(out, waypoint, before)
+    return Edit(edited, (*origin[:before], before, *origin[before:]), before)
+
+
+def _raise_takeoff(
+    items: Sequence[MissionItem],
+    out: list[MissionItem],
+    raises: Mapping[int, float],
+    settings: OffsetSettings,
+    path: FlightPath,
+) -> None:
+    """Raise in ``out`` every take-off at the start of a raised segment by that segment's
+    raise, where that lifts it more than :func:`plan_offsets` did."""
+    for k, delta in raises.items():
+        for index in path.vertices[k].items:
+            if items[index].command == NAV_TAKEOFF and index < len(out):
+                lifted = _raised(items[index], delta, settings, index)
+                if abs(lifted.z - items[index].z) > abs(out[index].z - items[index].z):
+                    out[index] = lifted
+
+
+def _climb_waypoint(
+    vehicle: Vehicle, target: MissionItem, frame: int, here: float, raised: float
+) -> MissionItem:
+    """A waypoint at the vehicle's altitude ``here`` (in ``frame``), toward ``target`` by the
+    lead the climb to ``raised`` needs (not within 10 m of ``target``)."""
     north, east = ground_offset(
         vehicle.lat / 1e7, vehicle.lon / 1e7, target.x / 1e7, target.y / 1e7
     )
@@ -186,7 +209,7 @@ def plan_edit(
     lat, lon = moved(
         vehicle.lat / 1e7, vehicle.lon / 1e7, *(c * lead / max(left, 1e-9) for c in (north, east))
     )
-    waypoint = MissionItem(
+    return MissionItem(
         0,
         frame,
         NAV_WAYPOINT,
@@ -200,12 +223,15 @@ def plan_edit(
         round(lon * 1e7),
         here,
     )
-    waypoint = _raised(waypoint, raised - here, settings, before)
+
+
+def _inserted(out: Sequence[MissionItem], waypoint: MissionItem, before: int) -> list[MissionItem]:
+    """``out`` with ``waypoint`` inserted at index ``before``, renumbered; jumps to the items
+    that moved on by one follow them."""
     edited = [*out[:before], waypoint, *out[before:]]
-    edited = [
+    return [
         it.replace(seq=i, param1=it.param1 + 1)
         if it.command == DO_JUMP and math.isfinite(it.param1) and it.param1 >= before
         else it.replace(seq=i)
         for i, it in enumerate(edited)
-    ]  # jumps to the items that moved on by one follow them
-    return Edit(edited, (*origin[:before], before, *origin[before:]), before)
+    ]

@@ -11,7 +11,7 @@ its altitude error for the band, and for the window a tolerance that grows with 
 it lies, wider on the late side than on the early one.  A drone still on the ground does not
 know exactly when it takes off: its windows start as if it took off now and are widened on
 the late side by how long it may still wait there (:attr:`Schedule.wait_s`; the companion
-compares again before that runs out, :meth:`companion.app.core.CompanionCore._keep_time`).  A
+compares again before that runs out, :meth:`companion.mission.own_flight.OwnFlight.keep_time`).  A
 drone holding in the air does not know when it flies on: its windows open at the earliest
 and stay open (:attr:`Schedule.open_ended`).  These are the volumes its runs compare
 (:mod:`protocol.geo.volumes`); :func:`off_schedule` tells when the drone has left them.

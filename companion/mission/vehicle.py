@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-from companion.neighbours.peers import distance_m
+from companion.mission.ground import distance_m
 
 
 @dataclass

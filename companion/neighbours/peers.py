@@ -8,69 +8,16 @@ the two drones flying straight at each other, never below ``floor_m_s`` each.
 
 from __future__ import annotations
 
-import itertools
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from companion.mission.ground import distance_m
 from companion.neighbours.beacon import Beacon
-from companion.runs.roles import Phase, Role
-from protocol.geo.geodesy import ground_offset
+from companion.roles import Phase, Role
 from protocol.run import DEFAULT_LIMITS
 
 MAX_SPEED_M_S = 40.0  # no drone flies faster: beacon speeds are capped, boxes bounded by it
 TRACK_SLACK_M = 200.0  # position error a track allows on top of MAX_SPEED_M_S
-
-
-def distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
-    """Ground distance between two degE7 points."""
-    return math.hypot(*ground_offset(a[0] / 1e7, a[1] / 1e7, b[0] / 1e7, b[1] / 1e7))
-
-
-def segment_distance_m(p: tuple[int, int], a: tuple[int, int], b: tuple[int, int]) -> float:
-    """Ground distance from point p to segment ab (degE7), on the tangent plane at p."""
-    ay, ax = ground_offset(p[0] / 1e7, p[1] / 1e7, a[0] / 1e7, a[1] / 1e7)
-    by, bx = ground_offset(p[0] / 1e7, p[1] / 1e7, b[0] / 1e7, b[1] / 1e7)
-    dx, dy = bx - ax, by - ay
-    length2 = dx * dx + dy * dy
-    t = 0.0 if length2 == 0 else max(0.0, min(1.0, -(ax * dx + ay * dy) / length2))
-    return math.hypot(ax + t * dx, ay + t * dy)
-
-
-def cut_at(
-    path: Sequence[tuple[int, int]],
-    horizon_m: float,
-    position: tuple[int, int] | None = None,
-) -> list[tuple[int, int]]:
-    """The path up to the first vertex at least ``horizon_m`` ahead (whole segments, so
-    nothing is rounded); all of it for a horizon of 0.  Distances count from ``position``
-    (the drone, somewhere on the first segment) when given, else from the first vertex."""
-    if horizon_m <= 0 or len(path) < 2:
-        return list(path)
-    out = [path[0]]
-    for k, (a, b) in enumerate(itertools.pairwise(path)):
-        out.append(b)
-        horizon_m -= distance_m(position if position is not None and k == 0 else a, b)
-        if horizon_m <= 0:
-            break
-    return out
-
-
-def near_cut(
-    path: Sequence[tuple[int, int]],
-    horizon_m: float,
-    position: tuple[int, int] | None = None,
-    *,
-    least: int = 2,
-) -> list[tuple[int, int]]:
-    """What a near run compares: :func:`cut_at`, at least ``least`` segments, and then as
-    many more as the padding makes free (runs are padded to a power of two, so 3 segments
-    cost what 4 do).  A near run that takes them may leave no full run to do, which under a
-    duty cycle is the difference between a result and a precaution."""
-    if horizon_m <= 0 or len(path) < 2:
-        return list(path)
-    segments = max(len(cut_at(path, horizon_m, position)) - 1, least)
-    return list(path[: DEFAULT_LIMITS.public_size(segments) + 1])
 
 
 @dataclass
@@ -199,21 +146,3 @@ def time_to_meet(
         if now is not None and now - peer.heard_at > silent_after_s:
             distance = max(distance - peer_speed * (now - peer.heard_at), 0.0)
     return distance / closing
-
-
-def reached_within(
-    path: Sequence[tuple[int, int]],
-    first: int,
-    position: tuple[int, int] | None,
-    distance: float,
-) -> set[int]:
-    """Indices (``first`` + k) of the segments the drone starts within ``distance`` metres
-    along its path from ``position`` (the current segment counts at once)."""
-    out = {first}
-    travelled = 0.0
-    for k, (a, b) in enumerate(itertools.pairwise(path)):
-        travelled += distance_m(position if position is not None and k == 0 else a, b)
-        if travelled > distance or k + 1 >= len(path) - 1:
-            break
-        out.add(first + k + 1)
-    return out

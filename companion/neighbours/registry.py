@@ -17,11 +17,11 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from companion.app.state import StateStore
 from companion.auth.beacon_keys import BeaconKeys
 from companion.auth.certificate import Certificate
 from companion.auth.trust import Operator, TrustStore, UntrustedPeer
 from companion.neighbours.beacon import Beacon, BeaconError, CertBeacon, SignedBeacon, decode_beacon
+from companion.state import StateStore
 
 HOLD_NODE_S = 120.0  # a node id stays with its drone this long after it was last heard
 NO_CERTIFICATE = "no certificate"

@@ -18,7 +18,6 @@ import random
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from companion.app.state import OWN, StateStore
 from companion.auth.beacon_keys import BeaconKeys
 from companion.auth.session import Identity
 from companion.mission.levels import Slots
@@ -29,6 +28,7 @@ from companion.neighbours.registry import Neighbours
 from companion.radio.airtime import LinkProfile
 from companion.radio.arq import LinkError
 from companion.radio.endpoint import LinkEndpoint
+from companion.state import OWN, StateStore
 from protocol.messages import Suite
 
 _JITTER = random.SystemRandom()

@@ -46,6 +46,11 @@ class Clock:
             self._wall_offset = time.time() - self.now()
         return self._wall_offset + self.now()
 
+    def shift_wall(self, seconds: float) -> None:
+        """The wall clock jumps by ``seconds`` while link time goes on (a GPS fix after a
+        drift; hours passing in a simulation)."""
+        self._wall_offset = self.wall() - self.now() + seconds
+
     async def sleep(self, seconds: float) -> None:
         await asyncio.sleep(max(seconds, 0.0) / self.scale)
 

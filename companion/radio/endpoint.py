@@ -45,7 +45,7 @@ from companion.radio.reassembly import Delivered, Receiver
 from companion.radio.stats import LinkStats
 from companion.radio.transmitter import Transmitter
 from companion.radio.transport import Transport
-from companion.tasks import spawn
+from companion.tasks import TaskScope
 
 log = logging.getLogger("companion.radio")
 _JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
@@ -90,8 +90,7 @@ class LinkEndpoint:
         self._accept: asyncio.Queue[tuple[int, int] | LinkError] = asyncio.Queue()
         self._outgoing: dict[tuple[int, int, int], tuple[Outgoing, asyncio.Event]] = {}
         self._timers: dict[int, RetransmissionTimer] = {}
-        self._tasks: list[asyncio.Task[None]] = []
-        self._lingering: set[asyncio.Task[None]] = set()
+        self._tasks = TaskScope(f"link-{node}", log)  # the transmitter, upkeep, lingering runs
         self._last_traffic = -math.inf
         self._beacon_seq = secrets.randbelow(256)
         self._beacon_parts = BeaconParts(self.stats)
@@ -101,14 +100,14 @@ class LinkEndpoint:
     async def start(self) -> None:
         self.radio.running = True
         self.transport.set_receiver(self._on_bytes)
-        self._tasks = [
-            spawn(work, name=f"link-{what}-{self.node}", log=log, on_failure=self._failed)
-            for what, work in (("tx", self.radio.run()), ("gc", self._housekeeping()))
-        ]
+        await self._tasks.open()
+        self._tasks.spawn(self.radio.run(), "tx", on_failure=self._failed)
+        self._tasks.spawn(self._housekeeping(), "gc", on_failure=self._failed)
 
-    def _failed(self, exc: BaseException) -> None:
-        """A link task died (logged by :func:`~companion.tasks.spawn`): the radio is gone, so
-        every send, receive and accept fails now with a LinkError instead of hanging."""
+    def _failed(self, name: str, exc: BaseException) -> None:
+        """A link task died (logged by its :class:`~companion.tasks.TaskScope`): the radio
+        is gone, so every send, receive and accept fails now with a LinkError instead of
+        hanging."""
         error = LinkError(f"node {self.node}: the link failed: {exc!r}")
         self.radio.stop(error)
         for _, acked in self._outgoing.values():
@@ -119,10 +118,7 @@ class LinkEndpoint:
 
     async def close(self) -> None:
         self.radio.running = False
-        tasks = [*self._tasks, *self._lingering]
-        for task in tasks:
-            task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)  # a dead one was logged
+        await self._tasks.close()  # (a task that died was logged)
         self.radio.fail_pending(LinkError("link endpoint closed"))
         await self.transport.close()
 
@@ -187,10 +183,21 @@ class LinkEndpoint:
         """Let ``work`` keep the open session (it closes it) beside whatever comes next: a
         finished run that may still be asked for its last message.  A lingering session
         does not make the radio :meth:`busy`; it ends with the endpoint."""
+        if not self._tasks.running:  # closed: nobody is left to ask
+            work.close()
+            self.close_session(peer, session)
+            return
         self._session(peer, session).lingering = True
-        task = spawn(work, name=f"link-linger-{self.node}-{peer}-{session}", log=log)
-        self._lingering.add(task)
-        task.add_done_callback(self._lingering.discard)
+        self._tasks.spawn(work, f"linger-{peer}-{session}")
+
+    @property
+    def open_sessions(self) -> int:
+        """Sessions open now (ours and those peers opened)."""
+        return len(self._sessions)
+
+    def retransmission_floor(self, peer: int) -> float:
+        """The shortest time the link waits for ``peer``'s ACK before it sends again."""
+        return self._timer(peer).floor
 
     def has_message(self, peer: int, session: int) -> bool:
         """A message of the session waits to be received."""

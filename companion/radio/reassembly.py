@@ -96,6 +96,7 @@ class Receiver:
         max_partial: int = 8,
         idle_timeout: float = 120.0,
         max_streams: int = 256,
+        epoch: int | None = None,
     ) -> None:
         self.node = node
         self.max_message = max_message
@@ -106,11 +107,17 @@ class Receiver:
         self._partial: dict[Key, _Partial] = {}
         self._streams: dict[StreamKey, _Stream] = {}
         self._trusted: set[StreamKey] = set()
-        self._epoch = secrets.randbelow(255) + 1  # of the last partial copy begun
+        # Of the last partial copy begun: from a random start (a restarted receiver's first
+        # epoch is the old one once in 255 restarts), or ``epoch`` where a test needs it.
+        self._epoch = secrets.randbelow(255) + 1 if epoch is None else epoch
 
     @property
     def buffered_bytes(self) -> int:
         return sum(p.size for p in self._partial.values())
+
+    def streams(self) -> frozenset[tuple[int, int]]:
+        """The (sender, session) streams whose delivered messages it remembers."""
+        return frozenset(self._streams)
 
     def pending(self) -> int:
         return len(self._partial)

@@ -17,21 +17,28 @@ import math
 import secrets
 
 from companion.auth.certificate import Certificate
-from companion.auth.session import AuthenticationError, Initiator, Refusal, Route
+from companion.auth.session import AuthenticationError, Identity, Initiator, Refusal, Route
+from companion.context import Context
 from companion.errors import CompanionError
 from companion.events import EventKind, PeerFailure, PeerNote, RunResult, RunStarted
-from companion.mission.edits import Edits
+from companion.mission.ground import distance_m, near_cut, segment_distance_m
+from companion.mission.own_flight import OwnFlight
 from companion.mission.schedule import route_volumes
 from companion.neighbours.beacon import keys_hash
-from companion.neighbours.peers import Peer, distance_m, near_cut, segment_distance_m, time_to_meet
+from companion.neighbours.neighbourhood import Neighbourhood
+from companion.neighbours.peers import Peer, time_to_meet
 from companion.neighbours.registry import Neighbour
-from companion.runs.budget import ALICE, MAX_RUN_WORK, BudgetExceeded, run_work
+from companion.radio.endpoint import LinkEndpoint
+from companion.roles import Phase, Role
+from companion.runs.budget import ALICE, MAX_RUN_WORK, BudgetExceeded, RunLedger, run_work
+from companion.runs.edits import Edits
+from companion.runs.estimates import RunEstimates
 from companion.runs.exchange import PeerRefused, RunReport, run_alice
 from companion.runs.failsafe import too_late
+from companion.runs.guard import Guard
 from companion.runs.progress import RunProgress
-from companion.runs.roles import Phase, Role
-from companion.runs.turns import OWN_FULL, OWN_NEAR
-from protocol.compact.plan import message_sizes
+from companion.runs.standing import Standing
+from companion.runs.turns import OWN_FULL, OWN_NEAR, Air
 from protocol.errors import ConsistencyError, ProtocolError
 from protocol.geo.grid import GridSpec
 from protocol.geo.volumes import CROSSING, VolumeSpec
@@ -51,69 +58,135 @@ QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a f
 GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet channel
 
 
-class AliceRuns(Edits):
-    """Comparing as Alice."""
+class AliceRuns:
+    """Comparing as Alice: :meth:`loop` runs the comparisons; :attr:`comparing` says whether
+    one is under way or due."""
 
-    async def _alice_loop(self) -> None:
+    def __init__(
+        self,
+        ctx: Context,
+        endpoint: LinkEndpoint,
+        identity: Identity,
+        flight: OwnFlight,
+        neighbourhood: Neighbourhood,
+        standing: Standing,
+        edits: Edits,
+        guard: Guard,
+        estimates: RunEstimates,
+        air: Air,
+        ledger: RunLedger,
+    ) -> None:
+        self.ctx = ctx
+        self.settings = ctx.settings
+        self.clock = ctx.clock
+        self.record = ctx.record
+        self.endpoint = endpoint
+        self.identity = identity
+        self.flight = flight
+        self.vehicle = flight.vehicle
+        self.neighbourhood = neighbourhood
+        self.sender = neighbourhood.sender
+        self.standing = standing
+        self.edits = edits
+        self.guard = guard
+        self.estimates = estimates
+        self.air = air
+        self.ledger = ledger
+        self._busy = asyncio.Lock()  # a comparison of ours is under way
+        self._wake = asyncio.Event()
+        self._ground_wait: float | None = None  # since when a run waits for a quiet channel
+
+    def wake(self) -> None:
+        """Look at the peers again at once (one was heard, an answer ended)."""
+        self._wake.set()
+
+    @property
+    def comparing(self) -> bool:
+        """A comparison as Alice is under way, half done, or put off by a peer busy with its
+        own (a drone about to take off waits for it); not one half done with a peer that has
+        since gone out of range or fallen silent: it resumes if they meet again."""
+        now = self.clock.now()
+        hood = self.neighbourhood
+        return self._busy.locked() or any(
+            (p.plan or p.busy or hood.introducing(p, now))
+            and self.standing.pending(p)
+            and not hood.silent_for(p)
+            for p in hood.peers.values()
+        )
+
+    async def loop(self) -> None:
         """One run at a time: every pending near run before any full run, the most urgent
         peer first; no new run while we answer a peer (one radio, half duplex)."""
         while True:
             with contextlib.suppress(TimeoutError):
                 await self.clock.wait_for(self._wake.wait(), 1.0)
             self._wake.clear()
-            now = self.clock.now()
-            due = [p for p in self.peers.values() if self._should_compare(p, now)]
-            if not due:
+            peer = self._next(self.clock.now())
+            if peer is None:
                 continue
-            for peer in due:
-                version = (peer.beacon.mission_version, self.compare_version)
-                if peer.plan_version != version or not peer.plan:
-                    if peer.plan_version != version:
-                        peer.covered, peer.settled, peer.near_run = set(), set(), None
-                    peer.plan, peer.plan_version = self._phases(peer), version
-            # A full run after a near run waits until it is needed (or the channel is quiet):
-            # meanwhile the radio serves every drone's near runs.
-            quiet = not self.endpoint.busy(QUIET_S) and not self._radio.waiting()
-            if self.vehicle.on_ground and not quiet:
-                # Before take-off nothing is urgent, and a run started while other drones'
-                # run is on the air slows theirs (in flight, perhaps past their deadline):
-                # wait for a quiet channel, a minute at most.
-                if self._ground_wait is None:
-                    self._ground_wait = now
-                if now - self._ground_wait < GROUND_WAIT_S:
-                    continue
-            self._ground_wait = None
-            ready = [p for p in due if p.plan[0][0] is Phase.NEAR or p.full_after <= now or quiet]
-            if not ready:
-                continue
-            peer = min(ready, key=lambda p: (p.plan[0][0] is not Phase.NEAR, self._urgency(p)))
             phase, horizon = peer.plan[0]
-            try:
-                priority = OWN_NEAR if phase is Phase.NEAR else OWN_FULL
-                async with self._busy, self._radio.turn(priority):
-                    done = await self._run(peer, phase, horizon)
-            except asyncio.CancelledError:
-                raise
-            except Exception as exc:  # nothing may stop the companion
-                log.exception("node %d: comparison failed", self.settings.node)
-                self.record(
-                    EventKind.RUN_FAILED, PeerFailure(peer=peer.node, error=f"internal: {exc!r}")
-                )
-                done = False
-            if done and phase is Phase.FULL and peer.full_left:
-                peer.full_left = False  # the full run went in parts: the next part at once
-            elif done:
-                peer.plan.pop(0)
-                if not peer.plan:
-                    peer.compared = peer.plan_version
-                elif phase is Phase.NEAR:
-                    peer.full_after = self._full_deadline(peer, horizon)
-            else:
-                if not peer.busy:  # (busy: the plan stands, the same run is asked again)
-                    peer.plan = []
-                retry = self.settings.retry_after_s if peer.retry_in is None else peer.retry_in
-                peer.next_try, peer.retry_in = self.clock.now() + retry, None
+            done = await self._turn(peer, phase, horizon)
+            self._after(peer, phase, horizon, done=done)
             self._wake.set()  # look again at once
+
+    def _next(self, now: float) -> Peer | None:
+        """The peer whose run goes next (its plan made or renewed), or None for now."""
+        due = [p for p in self.neighbourhood.peers.values() if self.standing.due(p, now)]
+        if not due:
+            return None
+        for peer in due:
+            version = (peer.beacon.mission_version, self.flight.compare_version)
+            if peer.plan_version != version or not peer.plan:
+                if peer.plan_version != version:
+                    peer.covered, peer.settled, peer.near_run = set(), set(), None
+                peer.plan, peer.plan_version = self._phases(peer), version
+        # A full run after a near run waits until it is needed (or the channel is quiet):
+        # meanwhile the radio serves every drone's near runs.
+        quiet = not self.endpoint.busy(QUIET_S) and not self.air.turns.waiting()
+        if self.vehicle.on_ground and not quiet:
+            # Before take-off nothing is urgent, and a run started while other drones'
+            # run is on the air slows theirs (in flight, perhaps past their deadline):
+            # wait for a quiet channel, a minute at most.
+            if self._ground_wait is None:
+                self._ground_wait = now
+            if now - self._ground_wait < GROUND_WAIT_S:
+                return None
+        self._ground_wait = None
+        ready = [p for p in due if p.plan[0][0] is Phase.NEAR or p.full_after <= now or quiet]
+        if not ready:
+            return None
+        urgency = self.neighbourhood.urgency
+        return min(ready, key=lambda p: (p.plan[0][0] is not Phase.NEAR, urgency(p)))
+
+    async def _turn(self, peer: Peer, phase: Phase, horizon: int) -> bool:
+        """The run, once the radio is ours; a bug in it is recorded, never fatal."""
+        try:
+            priority = OWN_NEAR if phase is Phase.NEAR else OWN_FULL
+            async with self._busy, self.air.turns.turn(priority):
+                return await self._run(peer, phase, horizon)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # nothing may stop the companion
+            log.exception("node %d: comparison failed", self.settings.node)
+            failure = PeerFailure(peer=peer.node, error=f"internal: {exc!r}")
+            self.record(EventKind.RUN_FAILED, failure)
+            return False
+
+    def _after(self, peer: Peer, phase: Phase, horizon: int, *, done: bool) -> None:
+        """The plan moves on after a run: the next part or phase, or a retry later."""
+        if done and phase is Phase.FULL and peer.full_left:
+            peer.full_left = False  # the full run went in parts: the next part at once
+        elif done:
+            peer.plan.pop(0)
+            if not peer.plan:
+                peer.compared = peer.plan_version
+            elif phase is Phase.NEAR:
+                peer.full_after = self._full_deadline(peer, horizon)
+        else:
+            if not peer.busy:  # (busy: the plan stands, the same run is asked again)
+                peer.plan = []
+            retry = self.settings.retry_after_s if peer.retry_in is None else peer.retry_in
+            peer.next_try, peer.retry_in = self.clock.now() + retry, None
 
     def _full_deadline(self, peer: Peer, horizon: int) -> float:
         """When the full run must start at the latest: so that its result comes before we
@@ -125,7 +198,7 @@ class AliceRuns(Edits):
         if self.vehicle.on_ground:
             return now
         speed = max(self.vehicle.speed_m_s, self.settings.cruise_m_s)
-        start, path = self._remaining_path()
+        start, path = self.flight.remaining_path()
         covered = [k - start for k in sorted(peer.covered) if k >= start]
         here = self.vehicle.here()
         left = sum(
@@ -135,21 +208,25 @@ class AliceRuns(Edits):
         )
         ends = now + left / speed
         if peer.near_run is not None:
-            ends = min(ends, self._near_expires(peer))
-        grid = self._grid(path)
+            ends = min(ends, self.standing.near_expires(peer))
+        grid = self.flight.grid(path)
         m = DEFAULT_LIMITS.public_size(len(path) - 1)
         n = peer.size
-        latest = ends - self._seconds(m, grid, fresh=False, n=n) - self.settings.failsafe.margin_s
+        latest = (
+            ends
+            - self.estimates.seconds(m, grid, fresh=False, n=n)
+            - self.settings.failsafe.margin_s
+        )
         return max(latest, now)
 
     def _phases(self, peer: Peer) -> list[tuple[Phase, int]]:
         """The runs a comparison with ``peer`` takes: near (what can be reached soon) when the
         remaining path reaches beyond its horizon, then full (horizon 0: everything)."""
-        _, path = self._remaining_path()
+        _, path = self.flight.remaining_path()
         phases = [(Phase.FULL, 0)]
         if self.settings.lookahead_s > 0 and len(path) >= 2:
             horizon = self._horizon_m(peer, path)
-            if len(self._near(path, horizon)) < len(path):
+            if len(self.flight.near(path, horizon)) < len(path):
                 phases.insert(0, (Phase.NEAR, horizon))
         return phases
 
@@ -164,10 +241,13 @@ class AliceRuns(Edits):
         and come too late.  Every term comes from what the beacons and the run sizes already
         tell: the horizon shows Bob nothing about Alice's path."""
         speed = max(self.vehicle.speed_m_s, self.settings.cruise_m_s)  # Bob cuts his path alike
-        grid = self._grid(path)
+        grid = self.flight.grid(path)
         now = self.clock.now()
-        due = [p for p in self.peers.values() if self._should_compare(p, now)] or [peer]
-        runs = sum(self._seconds(2, grid, fresh=p.node not in self.holder_setups) for p in due)
+        due = [p for p in self.neighbourhood.peers.values() if self.standing.due(p, now)] or [peer]
+        runs = sum(
+            self.estimates.seconds(2, grid, fresh=p.node not in self.neighbourhood.holder_setups)
+            for p in due
+        )
         # Nothing can happen before the peer could be here (both at cruise speed at least);
         # reach well past that moment.
         cruise = self.settings.cruise_m_s
@@ -189,7 +269,9 @@ class AliceRuns(Edits):
             self.vehicle.position[:2], speed, peer, floor_m_s=cruise, measured=False
         )
         gap = segment_distance_m(peer.position, a, b) - self.settings.separation.horizontal_m
-        reach = max(gap, 0.0) / self._peer_pace(peer) - self._silent_for(peer)
+        reach = max(gap, 0.0) / self.neighbourhood.peer_pace(peer) - self.neighbourhood.silent_for(
+            peer
+        )
         return max(meet, reach)
 
     def _before_meeting(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
@@ -199,7 +281,7 @@ class AliceRuns(Edits):
         segments stay; the full run compares everything left."""
         if self.vehicle.on_ground or len(path) <= 3 or not self.settings.lookahead_s:
             return 0
-        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        schedule = self.flight.original_schedule(start)
         tolerance = self.settings.separation.tolerance
         margin = self.settings.failsafe.margin_s
         skip = 0
@@ -233,9 +315,9 @@ class AliceRuns(Edits):
         the horizon at the peer's speed, :meth:`_decided`)."""
         # The same time ahead as ours: the peer may fly faster than we do.
         ours = max(self.vehicle.speed_m_s, self.settings.cruise_m_s)
-        theirs = self._peer_pace(peer)
+        theirs = self.neighbourhood.peer_pace(peer)
         horizon = max(horizon, math.ceil(horizon * theirs / ours))
-        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        schedule = self.flight.original_schedule(start)
         last = start + len(path) - 2
         end = schedule.window(last, self.settings.separation.tolerance)[1]
         if not math.isfinite(end):
@@ -246,8 +328,12 @@ class AliceRuns(Edits):
             return horizon
         m = DEFAULT_LIMITS.public_size(len(path) - 1)
         n = peer.size
-        seconds = self._seconds(m, grid, fresh=fresh, n=n) * NEAR_SLACK
-        return horizon if too_late(seconds, self._urgency(peer), self.settings.failsafe) else longer
+        seconds = self.estimates.seconds(m, grid, fresh=fresh, n=n) * NEAR_SLACK
+        return (
+            horizon
+            if too_late(seconds, self.neighbourhood.urgency(peer), self.settings.failsafe)
+            else longer
+        )
 
     def _decided_by_near(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
         """How many of a full run's first segments it need not compare: those the near run
@@ -257,10 +343,10 @@ class AliceRuns(Edits):
         smaller and sooner."""
         if peer.near_run is None or self.vehicle.on_ground:
             return 0
-        decided = self._decided(peer)
-        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        decided = self.standing.decided(peer)
+        schedule = self.flight.original_schedule(start)
         tolerance = self.settings.separation.tolerance
-        grid = self._grid(path)
+        grid = self.flight.grid(path)
         skip = 0
         for j in range(len(path) - 2):  # (one segment stays)
             k = start + j
@@ -271,7 +357,9 @@ class AliceRuns(Edits):
                 break
             m = DEFAULT_LIMITS.public_size(len(path) - 2 - j)
             n = min(m, BOB_GUESS)
-            if schedule.window(k, tolerance)[1] >= self._seconds(m, grid, fresh=False, n=n):
+            if schedule.window(k, tolerance)[1] >= self.estimates.seconds(
+                m, grid, fresh=False, n=n
+            ):
                 break
             skip += 1
         return skip
@@ -287,15 +375,15 @@ class AliceRuns(Edits):
         segments = min(len(path) - 1, self._most_segments(peer, path))
         if self.vehicle.on_ground or segments <= 2:
             return segments
-        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        schedule = self.flight.original_schedule(start)
         enter = schedule.window(start, self.settings.separation.tolerance)[0]
-        deadline = max(enter, self._urgency(peer))
-        grid = self._grid(path)
+        deadline = max(enter, self.neighbourhood.urgency(peer))
+        grid = self.flight.grid(path)
         n = peer.size
-        fresh = peer.node not in self.holder_setups
+        fresh = peer.node not in self.neighbourhood.holder_setups
         m = DEFAULT_LIMITS.public_size(segments)
         while m > 2:
-            seconds = self._seconds(m, grid, fresh=fresh, n=n)
+            seconds = self.estimates.seconds(m, grid, fresh=fresh, n=n)
             if not too_late(seconds, deadline, self.settings.failsafe):
                 break
             m //= 2
@@ -305,7 +393,7 @@ class AliceRuns(Edits):
         """The most segments of ``path`` one run may take: what the peer answers
         (:data:`companion.runs.budget.MAX_RUN_WORK`, with its size class and our grid)."""
         n = peer.size
-        grid = self._grid(path)
+        grid = self.flight.grid(path)
         m = MAX_SEGMENTS
         while m > 1 and run_work(m, n, grid.range) > MAX_RUN_WORK:
             m //= 2
@@ -313,7 +401,7 @@ class AliceRuns(Edits):
 
     async def _run(self, peer: Peer, phase: Phase, horizon: int) -> bool:
         """One run; True when it ended with a result (or had nothing to compare)."""
-        start, path = self._remaining_path()
+        start, path = self.flight.remaining_path()
         if phase is Phase.NEAR:
             skip = self._before_meeting(peer, start, path)
             if skip:  # what is left of the horizon after the segments skipped
@@ -325,7 +413,7 @@ class AliceRuns(Edits):
                 peer.settled |= set(range(start, start + skip))  # no volume of its can meet them
                 start, path = start + skip, near_cut(path[skip:], max(left, 1.0), least=2)
             else:
-                path = self._near(path, horizon)
+                path = self.flight.near(path, horizon)
             path = path[: self._most_segments(peer, path) + 1]
         else:
             skip = self._decided_by_near(peer, start, path)
@@ -335,9 +423,11 @@ class AliceRuns(Edits):
             path = path[: chunk + 1]
         if len(path) < 2:
             return True
-        neighbour = self.neighbours.get(peer.node)
+        neighbour = self.neighbourhood.registry.get(peer.node)
         if neighbour is None or neighbour.fingerprint != peer.identity:
-            self._forget(peer.node)  # its certificate is gone or taken over: not our peer
+            self.neighbourhood.forget(
+                peer.node
+            )  # its certificate is gone or taken over: not our peer
             return False
         op = neighbour.operator
         if self.settings.suite is Suite.PAPER and not op.paper_keys:
@@ -348,7 +438,11 @@ class AliceRuns(Edits):
             return False
         try:
             ticket = self.ledger.admit(
-                peer.identity, op.key.fingerprint, op.max_runs_per_hour, self.clock.wall(), ALICE
+                peer.identity,
+                op.key.fingerprint,
+                op.max_runs_per_hour,
+                self.clock.wall(),
+                ALICE,
             )
         except BudgetExceeded as exc:
             self.record(EventKind.BUDGET, PeerFailure(peer=peer.node, error=str(exc)))
@@ -374,44 +468,16 @@ class AliceRuns(Edits):
         peer.busy = False
         asked = horizon
         for attempt in range(2):
-            grid = self._grid(path)
-            setup = self.holder_setups.get(peer.node)
+            grid = self.flight.grid(path)
+            setup = self.neighbourhood.holder_setups.get(peer.node)
             if phase is Phase.NEAR:
                 horizon = self._bob_horizon(asked, start, path, peer, grid, fresh=setup is None)
             began = await self._begin(peer, phase, horizon, start, path, neighbour, grid, setup)
             if began is None:
                 return False
             alice, needed = began
-            watchdog = self._spawn(self._watch(peer, alice, grid, needed), "watch")
-            self._sessions += 1
-            self._own_on_air = alice
-
-            def secure(session: int, cert: Certificate = neighbour.cert) -> Initiator:
-                route = Route(self.settings.node, peer.node, session)
-                return Initiator(self.identity, cert, route, self.clock.wall())
-
-            progress = RunProgress(
-                self.settings.node,
-                self.endpoint,
-                peer.node,
-                Role.ALICE,
-                expected_bytes=functools.partial(self._run_bytes, alice, grid, fresh=setup is None),
-                ends_at=lambda: None if self._running is None else self._running[1],
-            )
             try:
-                with progress:
-                    report = await run_alice(
-                        self.endpoint,
-                        peer.node,
-                        alice,
-                        secure=secure,
-                        check_keys=lambda boot, public: (
-                            neighbour.beacon_key is not None
-                            and keys_hash(boot, neighbour.beacon_key, public) == neighbour.keys_hash
-                        ),
-                        timeout=self.settings.run_timeout_s,
-                        alive=functools.partial(self._still_heard, peer.node),
-                    )
+                report = await self._exchange(peer, alice, grid, needed, neighbour, setup is None)
             except PeerRefused as exc:
                 if self._refused(peer, phase, exc, grid, first=attempt == 0):
                     continue  # the peer lost our setup: a fresh one
@@ -419,18 +485,62 @@ class AliceRuns(Edits):
             except (ProtocolError, CompanionError) as exc:
                 self._failed(peer, phase, exc)
                 return False
-            finally:
-                self._sessions -= 1
-                self._own_on_air = None
-                self._running = None
-                watchdog.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await watchdog
             break
         else:
             return False
         await self._accept(peer, phase, start, path, alice, report)
         return True
+
+    async def _exchange(
+        self,
+        peer: Peer,
+        alice: Alice,
+        grid: GridSpec,
+        needed: float,
+        neighbour: Neighbour,
+        fresh: bool,
+    ) -> RunReport:
+        """Our machine's messages over the link, on the air and watched by the fail-safe
+        (:meth:`Guard.watch`) while they last."""
+        watchdog = self.ctx.spawn(self.guard.watch(peer, alice, grid, needed), "watch")
+        self.air.sessions += 1
+        self.air.own = alice
+
+        def secure(session: int, cert: Certificate = neighbour.cert) -> Initiator:
+            route = Route(self.settings.node, peer.node, session)
+            return Initiator(self.identity, cert, route, self.clock.wall())
+
+        def check_keys(boot: bytes, public: bytes) -> bool:
+            """The keys Bob shows are those his signed beacons announced."""
+            key = neighbour.beacon_key
+            return key is not None and keys_hash(boot, key, public) == neighbour.keys_hash
+
+        progress = RunProgress(
+            self.settings.node,
+            self.endpoint,
+            peer.node,
+            Role.ALICE,
+            expected_bytes=functools.partial(self.estimates.run_bytes, alice, grid, fresh=fresh),
+            ends_at=self.guard.ends_at,
+        )
+        try:
+            with progress:
+                return await run_alice(
+                    self.endpoint,
+                    peer.node,
+                    alice,
+                    secure=secure,
+                    check_keys=check_keys,
+                    timeout=self.settings.run_timeout_s,
+                    alive=functools.partial(self.neighbourhood.still_heard, peer.node),
+                )
+        finally:
+            self.air.sessions -= 1
+            self.air.own = None
+            self.guard.running = None
+            watchdog.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await watchdog
 
     async def _begin(
         self,
@@ -463,8 +573,8 @@ class AliceRuns(Edits):
                 EventKind.RUN_FAILED, PeerFailure(peer=peer.node, phase=phase, error=str(exc))
             )
             return None
-        needed = self._seconds(alice.m, grid, fresh=setup is None, n=1)
-        meet = self._urgency(peer)
+        needed = self.estimates.seconds(alice.m, grid, fresh=setup is None, n=1)
+        meet = self.neighbourhood.urgency(peer)
         self.record(
             EventKind.RUN_STARTED,
             RunStarted(
@@ -479,7 +589,7 @@ class AliceRuns(Edits):
         if phase is Phase.NEAR:
             peer.near_run = (self.clock.now(), horizon)
         if too_late(needed, meet, self.settings.failsafe):
-            await self._precaution(peer, needed, meet)
+            await self.guard.precaution(peer, needed, meet)
         return alice, needed
 
     def _failed(self, peer: Peer, phase: Phase, exc: ProtocolError | CompanionError) -> None:
@@ -489,7 +599,7 @@ class AliceRuns(Edits):
         elif isinstance(exc, ConsistencyError):
             # The peer's OT extension is not the honest one: it probed our Delta.  Drop the
             # setup (a wrong guess must not be followed by another on the same Delta).
-            self.holder_setups.pop(peer.node, None)
+            self.neighbourhood.holder_setups.pop(peer.node, None)
             failure = PeerFailure(peer=peer.node, phase=phase, deviated=str(exc))
         else:
             failure = PeerFailure(peer=peer.node, phase=phase, error=str(exc))
@@ -501,7 +611,7 @@ class AliceRuns(Edits):
         """The peer refused our run before any work: True to run again at once (it lost our
         OT setup: a fresh one), else what the refusal means is recorded."""
         if exc.code is Refusal.UNKNOWN_SETUP and first:
-            self.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
+            self.neighbourhood.holder_setups.pop(peer.node, None)  # the peer lost it: start afresh
             self.record(EventKind.SETUP_RENEWED, PeerNote(peer=peer.node))
             return True
         if exc.code is Refusal.ROLE:
@@ -543,7 +653,7 @@ class AliceRuns(Edits):
         """A run's result: keep the OT setup, note what it covered and flagged, release a
         precaution it settles, and plan the edit again."""
         if alice.setup is not None:
-            self.holder_setups[peer.node] = alice.setup
+            self.neighbourhood.holder_setups[peer.node] = alice.setup
         flagged = {start + j for j, hit in enumerate(report.hits) if hit}
         covered = set(range(start, start + len(path) - 1))
         peer.conflicts = (peer.conflicts - covered) | flagged
@@ -564,9 +674,9 @@ class AliceRuns(Edits):
                 run_s=round(report.wall_s, 1),
             ),
         )
-        if phase is Phase.FULL or covered >= self.precaution.get(peer.node, set()):
-            await self._release(peer)
-        await self._replan(f"result of the {phase} run with {peer.node}")
+        if phase is Phase.FULL or covered >= self.edits.precaution.get(peer.node, set()):
+            await self.edits.release(peer.node)
+        await self.edits.replan(f"result of the {phase} run with {peer.node}")
 
     def _own_route(
         self, grid: GridSpec, start: int, path: list[tuple[int, int]]
@@ -575,33 +685,17 @@ class AliceRuns(Edits):
         the grid, with its bands and windows (:mod:`companion.mission.schedule`), and the run's
         volume parameters (epoch: now)."""
         epoch = int(self.clock.wall())
-        volumes = self._volumes(grid, epoch)
+        volumes = self.estimates.volumes(grid, epoch)
         points = grid.project_path(path)
         if volumes == CROSSING:
             return PathRoute(points), volumes
-        schedule = self._schedule(self.original, self.path, start, self.original_current)
+        schedule = self.flight.original_schedule(start)
         bands, windows = route_volumes(
             schedule,
             start,
             len(path) - 1,
             grid.resolution_mm,
-            self._wall_of_state() - epoch,
+            self.flight.wall_of_state() - epoch,
             self.settings.separation.tolerance,
         )
         return PathRoute(points, bands, windows), volumes
-
-    def _run_bytes(self, alice: Alice, grid: GridSpec, *, fresh: bool) -> int | None:
-        """Payload bytes the run is expected to move both ways (Bob's size guessed as
-        Alice's until his first reply; None for the paper suite, which has no size model)."""
-        if self.settings.suite is not Suite.COMPACT:
-            return None
-        n = alice.m if alice.n is None else alice.n
-        sizes = message_sizes(
-            alice.m,
-            n,
-            grid,
-            fresh_setup=fresh,
-            ot_security=self.settings.ot_security,
-            volumes=self._volumes(grid),
-        )
-        return sum(size for _, size in sizes)

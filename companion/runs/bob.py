@@ -12,53 +12,101 @@ from __future__ import annotations
 import functools
 import logging
 import math
+from collections.abc import Callable
+from typing import NamedTuple
 
-from companion.app.core import CompanionCore
-from companion.auth.session import AuthenticationError, Init, Refusal, Responder, Route
+from companion.auth.certificate import Certificate
+from companion.auth.session import AuthenticationError, Identity, Init, Refusal, Responder, Route
+from companion.context import Context
 from companion.errors import CompanionError
 from companion.events import Answered, EventKind, PeerFailure, PeerNote
+from companion.mission.ground import distance_m
 from companion.mission.items import point_as_segment
+from companion.mission.own_flight import OwnFlight
 from companion.mission.schedule import T_RANGE_S, route_volumes, run_volumes
 from companion.neighbours.beacon import MAX_SIZE_CLASS
-from companion.neighbours.peers import Peer, distance_m
+from companion.neighbours.neighbourhood import Neighbourhood
+from companion.neighbours.peers import Peer
 from companion.radio.arq import LinkError
+from companion.radio.endpoint import LinkEndpoint
 from companion.radio.frames import AbortCode
-from companion.runs.budget import BOB, MAX_RUN_WORK, BudgetExceeded, run_work
-from companion.runs.exchange import serve_bob
+from companion.roles import Role
+from companion.runs.budget import BOB, MAX_RUN_WORK, BudgetExceeded, RunLedger, run_work
+from companion.runs.exchange import RunReport, serve_bob
 from companion.runs.progress import RunProgress
-from companion.runs.roles import Role
-from companion.runs.turns import ANSWER_FULL, ANSWER_NEAR
+from companion.runs.turns import ANSWER_FULL, ANSWER_NEAR, Air
+from companion.state import StateStore
 from protocol.errors import ProtocolError
 from protocol.geo.grid import GridKind
 from protocol.geo.volumes import Route as PathRoute
 from protocol.intersection import Bob
 from protocol.messages import Hello
+from protocol.ot.setup import ChooserSetup
+from protocol.paper.keys import BobKeys
 
 log = logging.getLogger("companion")
 SETUPS_PER_PEER = 2
 
 
-class BobAnswers(CompanionCore):
-    """Answering as Bob."""
+class Responding(NamedTuple):
+    """Who answers: our identity, our paper-suite keys (if we answer that suite), the boot
+    nonce of this start (peers drop our setups when it changes) and the state on disk (the
+    replay cache)."""
 
-    async def _serve(self) -> None:
+    identity: Identity
+    bob_keys: BobKeys | None
+    boot: bytes
+    store: StateStore
+
+
+class BobAnswers:
+    """Answering as Bob (:meth:`serve`).  ``on_done()``: an answer ended (the radio is
+    free for our own runs)."""
+
+    def __init__(
+        self,
+        ctx: Context,
+        endpoint: LinkEndpoint,
+        me: Responding,
+        flight: OwnFlight,
+        neighbourhood: Neighbourhood,
+        air: Air,
+        ledger: RunLedger,
+        on_done: Callable[[], None],
+    ) -> None:
+        self.ctx = ctx
+        self.settings = ctx.settings
+        self.clock = ctx.clock
+        self.record = ctx.record
+        self.endpoint = endpoint
+        self.identity, self.bob_keys, self.boot, self.store = me
+        self.flight = flight
+        self.vehicle = flight.vehicle
+        self.neighbourhood = neighbourhood
+        self.air = air
+        self.ledger = ledger
+        self._on_done = on_done
+        self._unknown_refused = -math.inf  # when we last refused a drone we do not know
+
+    async def serve(self) -> None:
+        """Every run request the radio brings, answered in a task of its own."""
         while True:
             peer, session = await self.endpoint.accept()
-            self._spawn(self._answer(peer, session))
+            self.ctx.spawn(self._answer(peer, session), "answer")
 
     def _bob_path(self, hello: Hello) -> list[tuple[int, int]] | PathRoute:
         """What we answer with: the rest of the mission the vehicle holds, cut at Alice's
         horizon, with its bands (on her grid) and windows (after her epoch) when she asks
         for them."""
-        start, path = self._remaining_flown()
-        path = self._near(path, hello.horizon_m)
+        start, path = self.flight.remaining_flown()
+        path = self.flight.near(path, hello.horizon_m)
         points = point_as_segment(path)  # hovering: a point
         volumes = hello.volumes
         if not (volumes.bands or volumes.windows):
             return points
         tolerance = self.settings.separation.tolerance
         resolution = hello.grid.resolution_mm
-        since = self._wall_of_state() - volumes.epoch_s
+        since = self.flight.wall_of_state() - volumes.epoch_s
         if len(path) < 2:  # a point: here, from now on
             alt = self.vehicle.position[2]
             cells = 1000.0 / resolution
@@ -67,7 +115,7 @@ class BobAnswers(CompanionCore):
                 math.ceil((alt + tolerance.altitude_m) * cells),
             )
             return PathRoute(tuple(points), (band,), ((math.floor(since), T_RANGE_S),))
-        schedule = self._schedule(self.mission, self.flown, start, self.vehicle.current_item)
+        schedule = self.flight.held_schedule(start)
         bands, windows = route_volumes(schedule, start, len(path) - 1, resolution, since, tolerance)
         return PathRoute(tuple(points), bands, windows)
 
@@ -76,20 +124,57 @@ class BobAnswers(CompanionCore):
         signature, a fresh time, not a replay) and that the run is plausible and within the
         budget: nobody else makes us work, and what goes back is a one-byte abort code or a
         signed refusal, never anything about our path."""
-        setups = self.chooser_setups.setdefault(peer, {})
-        self._answering += 1
-        waiting = False
+        setups = self.neighbourhood.chooser_setups.setdefault(peer, {})
         try:
             request = await self.endpoint.receive(peer, session)
             admitted = await self._admit(peer, session, request)
             if admitted is None:
                 return
-            responder, hello, ticket = admitted
-            self._answers_waiting += 1
-            waiting = True
-            async with self._radio.turn(ANSWER_NEAR if hello.horizon_m > 0 else ANSWER_FULL):
-                self._answers_waiting, waiting = self._answers_waiting - 1, False
-                self._sessions += 1
+            report, bob = await self._serve_admitted(peer, session, *admitted, setups)
+        except AuthenticationError as exc:
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, auth=str(exc)))
+            return
+        except (ProtocolError, CompanionError) as exc:
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=str(exc)))
+            return
+        except Exception as exc:  # nothing may stop the companion
+            log.exception("node %d: answering %d failed", self.settings.node, peer)
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=f"internal: {exc!r}"))
+            return
+        finally:
+            self._on_done()
+            while len(setups) > SETUPS_PER_PEER:  # the oldest go first
+                setups.pop(next(iter(setups)))
+        if report.refused is not None:
+            self.record(EventKind.REFUSED, PeerNote(peer=peer, reason=report.refused.name))
+            return
+        self.record(
+            EventKind.ANSWERED,
+            Answered(
+                peer=peer,
+                bytes=report.bytes_sent,
+                auth_bytes=report.auth_bytes_sent,
+                guard_bytes=bob.guard_bytes,
+            ),
+        )
+
+    async def _serve_admitted(
+        self,
+        peer: int,
+        session: int,
+        responder: Responder,
+        hello: Hello,
+        ticket: int,
+        setups: dict[bytes, ChooserSetup],
+    ) -> tuple[RunReport, Bob]:
+        """An admitted request, answered once the radio is ours (answers first, near before
+        full); the run is refunded if Alice never got our first reply."""
+        self.air.answers_waiting += 1
+        waiting = True
+        try:
+            async with self.air.turns.turn(ANSWER_NEAR if hello.horizon_m > 0 else ANSWER_FULL):
+                self.air.answers_waiting, waiting = self.air.answers_waiting - 1, False
+                self.air.sessions += 1
                 separation = run_volumes(
                     self.settings.separation, hello.grid.resolution_mm, 0
                 ).separation
@@ -111,41 +196,16 @@ class BobAnswers(CompanionCore):
                             boot=self.boot,
                             timeout=self.settings.run_timeout_s,
                             first=responder.init.hello,
-                            alive=functools.partial(self._still_heard, peer),
+                            alive=functools.partial(self.neighbourhood.still_heard, peer),
                         )
                 finally:
-                    self._sessions -= 1
+                    self.air.sessions -= 1
                     if not responder.keyed:  # no first reply: Alice learnt nothing
                         self.ledger.refund(ticket)
-        except AuthenticationError as exc:
-            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, auth=str(exc)))
-            return
-        except (ProtocolError, CompanionError) as exc:
-            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=str(exc)))
-            return
-        except Exception as exc:  # nothing may stop the companion
-            log.exception("node %d: answering %d failed", self.settings.node, peer)
-            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=f"internal: {exc!r}"))
-            return
         finally:
             if waiting:
-                self._answers_waiting -= 1
-            self._answering -= 1
-            self._wake.set()
-            while len(setups) > SETUPS_PER_PEER:  # the oldest go first
-                setups.pop(next(iter(setups)))
-        if report.refused is not None:
-            self.record(EventKind.REFUSED, PeerNote(peer=peer, reason=report.refused.name))
-            return
-        self.record(
-            EventKind.ANSWERED,
-            Answered(
-                peer=peer,
-                bytes=report.bytes_sent,
-                auth_bytes=report.auth_bytes_sent,
-                guard_bytes=bob.guard_bytes,
-            ),
-        )
+                self.air.answers_waiting -= 1
+        return report, bob
 
     async def _admit(
         self, peer: int, session: int, request: bytes
@@ -153,7 +213,6 @@ class BobAnswers(CompanionCore):
         """The checks before any work on a request, cheapest first.  None: the request was
         dropped, aborted (code only) or refused (signed), and the session is closed."""
         wall = self.clock.wall()
-        skew = self.settings.max_clock_skew_s
         try:
             init = Init.parse(request)
         except AuthenticationError as exc:
@@ -161,36 +220,12 @@ class BobAnswers(CompanionCore):
             self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, auth=str(exc)))
             return None
         responder = Responder(self.identity, init, Route(peer, self.settings.node, session))
-        neighbour = self.neighbours.get(peer)
-        known = self.peers.get(peer)
+        neighbour = self.neighbourhood.registry.get(peer)
+        known = self.neighbourhood.peers.get(peer)
         if neighbour is None or known is None or known.identity != neighbour.fingerprint:
-            if self.neighbours.untrusted(peer):  # ignored: not a word back
-                self.endpoint.close_session(peer, session)
-                return None
-            # A drone whose certificate (or beacon) we lack: say so -- signed, at most every
-            # half a beacon interval -- and ask for its certificate.
-            self.sender.send_certificate(ask=True)
-            if self.clock.now() - self._unknown_refused >= self.cadence.asked_every_s:
-                self._unknown_refused = self.clock.now()
-                await self._refuse(peer, session, responder, Refusal.UNKNOWN_PEER)
-            else:
-                self.endpoint.close_session(peer, session)
+            await self._unknown(peer, session, responder)
             return None
-        # Fresh: made when its first frame could have left (a duty-cycled sender may wait
-        # up to a window for its budget); answered once (the replay cache on disk outlives
-        # the window).
-        wait = self.endpoint.profile.budget_wait_s
-        try:
-            responder.verify(neighbour.cert, self.endpoint.arrived(peer, session), skew, wait)
-            forget = wall - 2 * (skew + wait)
-            if not self.store.first_request(init.replay_key, wall, forget):
-                raise AuthenticationError("a request answered before (a replay)")
-        except AuthenticationError as exc:
-            # Signed: the requester's link takes no abort without a proof (a stale request
-            # of an honest drone learns at once; a forger's learns nothing new).
-            proof = responder.abort_proof(AbortCode.AUTH)
-            self.endpoint.abort(peer, session, AbortCode.AUTH, proof)
-            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, auth=str(exc)))
+        if not self._fresh(peer, session, responder, neighbour.cert, wall):
             return None
         try:
             hello = Hello.from_bytes(init.hello)
@@ -222,6 +257,43 @@ class BobAnswers(CompanionCore):
         known.conflicts.clear()  # as Bob we do not adjust for this peer
         return responder, hello, ticket
 
+    async def _unknown(self, peer: int, session: int, responder: Responder) -> None:
+        """A request from a drone we cannot check: an untrusted one is ignored (not a word
+        back); one whose certificate (or beacon) we lack is told so -- signed, at most every
+        half a beacon interval -- and asked for its certificate."""
+        if self.neighbourhood.registry.untrusted(peer):
+            self.endpoint.close_session(peer, session)
+            return
+        self.neighbourhood.sender.send_certificate(ask=True)
+        now = self.clock.now()
+        if now - self._unknown_refused >= self.neighbourhood.cadence.asked_every_s:
+            self._unknown_refused = now
+            await self._refuse(peer, session, responder, Refusal.UNKNOWN_PEER)
+        else:
+            self.endpoint.close_session(peer, session)
+
+    def _fresh(
+        self, peer: int, session: int, responder: Responder, cert: Certificate, wall: float
+    ) -> bool:
+        """Signed by ``cert``, made when its first frame could have left (a duty-cycled
+        sender may wait up to a window for its budget) and answered once (the replay cache
+        on disk outlives the window); else aborted with a proof."""
+        skew = self.settings.max_clock_skew_s
+        wait = self.endpoint.profile.budget_wait_s
+        try:
+            responder.verify(cert, self.endpoint.arrived(peer, session), skew, wait)
+            forget = wall - 2 * (skew + wait)
+            if not self.store.first_request(responder.init.replay_key, wall, forget):
+                raise AuthenticationError("a request answered before (a replay)")
+        except AuthenticationError as exc:
+            # Signed: the requester's link takes no abort without a proof (a stale request
+            # of an honest drone learns at once; a forger's learns nothing new).
+            proof = responder.abort_proof(AbortCode.AUTH)
+            self.endpoint.abort(peer, session, AbortCode.AUTH, proof)
+            self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, auth=str(exc)))
+            return False
+        return True
+
     def _refusal(self, peer: int, hello: Hello, known: Peer, max_segments: int) -> Refusal | None:
         """The checks on an authenticated request before any work, cheapest first: the role,
         a radio that is not free, the size (its beacon's, its operator's limit, a fair run's
@@ -234,18 +306,12 @@ class BobAnswers(CompanionCore):
             self.record(
                 EventKind.YIELDED, PeerNote(peer=peer, reason="the peer has the lower node id")
             )
-        own = self._own_on_air
-        if (own is not None and own.n is None) or self._answers_waiting:
-            # Our own run holds the radio and still waits for its peer's first reply (a
-            # third drone, perhaps busy itself), or another answer already waits for the
-            # radio: a request kept waiting would keep its sender's radio idle too, a chain
-            # of drones each waiting on the next (companion.runs.turns).  Otherwise it waits: at
-            # most one answer behind a run that is under way.
+        if self.air.too_busy_to_wait():  # (companion.runs.turns)
             return Refusal.BUSY
         allowed = min(max_segments, 1 << min(known.beacon.size_class, MAX_SIZE_CLASS))
         if hello.m > allowed:  # more than its beacon announced or its operator allows
             return Refusal.SIZE
-        if run_work(hello.m, self._own_size(), hello.grid.range) > MAX_RUN_WORK:
+        if run_work(hello.m, self.flight.own_size(), hello.grid.range) > MAX_RUN_WORK:
             # More than a fair run (m x n x grid bits): Bob's CPU, memory and first reply
             # grow with it, and a refused run costs the asker nothing.
             return Refusal.SIZE

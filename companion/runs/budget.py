@@ -17,9 +17,9 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from companion.app.state import StateStore
 from companion.errors import CompanionError
-from companion.runs.roles import Role
+from companion.roles import Role
+from companion.state import StateStore
 
 ALICE, BOB = Role.ALICE, Role.BOB
 

@@ -41,7 +41,7 @@ from companion.errors import CompanionError
 from companion.radio.arq import LinkError, LinkTimeout, PeerAborted
 from companion.radio.endpoint import LinkEndpoint
 from companion.radio.frames import AbortCode
-from companion.runs.roles import Role
+from companion.roles import Role
 from protocol.errors import ProtocolError, UnknownSetupError
 from protocol.intersection import Alice, Bob
 from protocol.run import State

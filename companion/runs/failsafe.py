@@ -23,7 +23,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from companion.neighbours.peers import reached_within, segment_distance_m
+from companion.mission.ground import reached_within, segment_distance_m
 from companion.radio.airtime import DutyCycle, LinkProfile
 from companion.radio.config import LinkConfig
 from companion.radio.frames import MAX_ACK_BITMAP, OVERHEAD

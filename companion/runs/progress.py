@@ -15,10 +15,10 @@ import logging
 from collections.abc import Callable
 from dataclasses import astuple, dataclass
 
-from companion.app import logs
+from companion import logs
 from companion.radio.endpoint import LinkEndpoint
 from companion.radio.stats import LinkStats
-from companion.runs.roles import Role
+from companion.roles import Role
 from companion.tasks import spawn
 
 log = logging.getLogger("companion.runs.progress")

@@ -19,6 +19,8 @@ import heapq
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
+from protocol.intersection import Alice
+
 ANSWER_NEAR, ANSWER_FULL, OWN_NEAR, OWN_FULL = 0, 1, 2, 3
 
 
@@ -62,3 +64,28 @@ class RadioTurns:
                 future.set_result(None)
                 return
         self._taken = False
+
+
+class Air:
+    """What a companion has on its one radio: the turns, the runs on the air (as Alice or
+    Bob), our own run's machine while it holds the radio, and the admitted answers waiting
+    for it."""
+
+    def __init__(self) -> None:
+        self.turns = RadioTurns()
+        self.sessions = 0  # runs on the air
+        self.own: Alice | None = None  # our own run's machine while it holds the radio
+        self.answers_waiting = 0  # admitted answers waiting for the radio (at most one)
+
+    @property
+    def in_run(self) -> bool:
+        """A run is on the air, as Alice or as Bob."""
+        return self.sessions > 0
+
+    def too_busy_to_wait(self) -> bool:
+        """Our own run holds the radio and still waits for its peer's first reply (a third
+        drone, perhaps busy itself), or another answer already waits for the radio: a request
+        kept waiting would keep its sender's radio idle too, a chain of drones each waiting
+        on the next (see the module).  Otherwise it waits: at most one answer behind a run
+        that is under way."""
+        return (self.own is not None and self.own.n is None) or self.answers_waiting > 0

@@ -8,11 +8,11 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from companion.app.runtime import Credentials
 from companion.auth.certificate import Certificate
 from companion.auth.keys import SigningKey
 from companion.auth.session import Identity
 from companion.auth.trust import Operator, TrustStore, UnknownPeers
+from companion.settings import Credentials
 
 VALID_S = 14 * 86400  # long enough for the slowest replay's simulated hours
 

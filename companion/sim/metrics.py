@@ -208,8 +208,8 @@ def _drone_report(
         vehicle=vehicle.kind,
         segments=d.path.segments,
         conflicting_segments=[k for k, h in enumerate(plain) if h],
-        flagged_segments=sorted(c.flagged),
-        raises={str(k): v for k, v in sorted(c.raises.items())},
+        flagged_segments=sorted(c.edits.flagged),
+        raises={str(k): v for k, v in sorted(c.flight.raises.items())},
         edits=[e.detail for e in c.events if e.kind is K.UPLOADED],
         edit=_edit_status(c),
         runs_unfinished=_unfinished(c),
@@ -239,9 +239,9 @@ def _drone_report(
             for e in c.events
             if e.kind is K.UNTRUSTED and isinstance(e.payload, Stranger)
         ],
-        beacons_rejected=dict(c.rejected),
+        beacons_rejected=dict(c.neighbourhood.rejected),
         max_altitude_m_amsl=round(max((alt for *_, alt in vehicle.trajectory), default=0.0), 2),
-        vehicle_holds=_holds(held, d.mission, c.mission, d.ardupilot),
+        vehicle_holds=_holds(held, d.mission, c.flight.mission, d.ardupilot),
     )
 
 

@@ -85,6 +85,18 @@ async def _run(
             bob_task.cancel()
             raise
         bob_report = await bob_task
+    return _result(case, report, bob_report, a, b, channel)
+
+
+def _result(
+    case: Case,
+    report: RunReport,
+    bob_report: RunReport,
+    a: LinkEndpoint,
+    b: LinkEndpoint,
+    channel: Channel,
+) -> dict[str, Any]:
+    """One case's figures: both parties' reports and both endpoints' and the channel's stats."""
     stats = (a.stats, b.stats)
     return {
         "hits": report.hits,

@@ -33,8 +33,9 @@ from companion.mission.items import MissionItem
 from companion.mission.personalities import personality
 from companion.mission.planner import OffsetSettings
 from companion.mission.schedule import SeparationSettings
-from companion.radio import Clock, LinkEndpoint, profile
+from companion.radio import Clock, LinkEndpoint, LinkProfile, profile
 from companion.runs.failsafe import FailsafeSettings
+from companion.settings import Credentials
 from companion.sim.fleet import make_fleet
 from companion.sim.inproc import InProcessVehicle
 from companion.sim.medium import Channel, Impairments, SimMedium
@@ -269,7 +270,7 @@ class _Script:
             waiting = (
                 d.hold_for_comparisons
                 and d.id in self.companions
-                and self.companions[d.id].comparing
+                and self.companions[d.id].alice.comparing
             )
             if d.id not in self.started and sim >= d.takeoff_delay_s and not waiting:
                 await self.vehicles[d.id].take_off()
@@ -279,7 +280,7 @@ class _Script:
     async def _vanish(self, d: DroneSpec, sim: float) -> None:
         gone = self.companions.get(d.id)
         due = d.companion_stop_s is not None and sim >= d.companion_stop_s
-        if due and gone and (gone.in_run or not d.companion_stop_in_run):
+        if due and gone and (gone.air.in_run or not d.companion_stop_in_run):
             await gone.stop()  # the peer vanishes: its radio goes silent
             self.vanished[d.id] = self.companions.pop(d.id)
             self.say(f"t={sim:.0f} s: drone {d.id}'s companion vanishes")
@@ -339,6 +340,108 @@ async def _shut_down(
     return held
 
 
+def _clock(
+    scenario: Scenario, px4: Px4Build | None, px4_speed_max: float, *, virtual: bool
+) -> tuple[float, PacedClock | None, Clock]:
+    """The replay's time scale and clock (and the paced clock, when the mocks fly on one)."""
+    ts = scenario.time_scale if px4 is None else min(scenario.time_scale, px4_speed_max)
+    # Mocks fly on a clock paced by this process (a busy machine does not pass as flight
+    # time); PX4 SITL keeps lock-step real time, so with it the plain scaled clock; a virtual
+    # replay's clock is its loop's, and every step's CPU passes as link time.
+    paced = PacedClock(ts) if px4 is None and not virtual else None
+    clock = paced or (Clock(charges_cpu=True) if virtual else Clock(ts))
+    return ts, paced, clock
+
+
+def _radio(scenario: Scenario, clock: Clock) -> tuple[SimMedium, LinkProfile]:
+    """The shared simulated channel and the link profile of the scenario."""
+    medium = SimMedium(Channel(Impairments(loss=scenario.loss), scenario.seed), clock)
+    return medium, profile(scenario.link_profile)
+
+
+def _fleet(scenario: Scenario, root: Path) -> dict[int, Credentials]:
+    """The drones' credentials (state under ``root``), trusted as the scenario says."""
+    return make_fleet(
+        [(d.id, d.operator) for d in scenario.drones],
+        root,
+        untrusted=scenario.untrusted_operators,
+        unknown=scenario.unknown_peers,
+    )
+
+
+def _sayer(progress: bool) -> Callable[[str], None]:
+    """Progress lines on stderr, or nothing."""
+
+    def say(message: str) -> None:
+        if progress:
+            print(f"  ... {message}", file=sys.stderr, flush=True)
+
+    return say
+
+
+async def _bring_up(
+    scenario: Scenario,
+    px4: Px4Build | None,
+    ts: float,
+    clock: Clock,
+    radio: tuple[SimMedium, LinkProfile],
+    origin: float,
+    fleet: dict[int, Credentials],
+    say: Callable[[str], None],
+    *,
+    virtual: bool,
+    mocks: dict[int, ReplayVehicle],
+    companions: dict[int, Companion],
+    autopilots: list[AutopilotBase],
+) -> None:
+    """Start every drone's vehicle, autopilot link and companion on the shared channel (into
+    ``mocks``, ``autopilots`` and ``companions`` as they come up: what is up is shut down)."""
+    medium, link = radio
+    flight = FlightModel(
+        cruise_m_s=scenario.cruise_m_s,
+        time_scale=1.0 if virtual else ts,
+        rate_hz=VIRTUAL_RATE_HZ if virtual else 20.0,
+    )
+    for d in scenario.drones:
+        vehicle = _vehicle(d, scenario, px4, ts, flight, clock, virtual=virtual)
+        mocks[d.id] = vehicle
+        await vehicle.start(origin)
+        ap = await _autopilot(vehicle, d)
+        autopilots.append(ap)
+        settings = _settings(d, scenario, vehicle.api_url)
+        endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
+        companions[d.id] = Companion(settings, endpoint, ap, fleet[d.id])
+        via = "MAVSDK" if isinstance(ap, Autopilot) else "no MAVLink"
+        say(f"drone {d.id}: {vehicle.kind} vehicle up ({via})")
+    # The companions start together: one set up earlier would have the radio (and its
+    # first runs) to itself while the others' vehicles still start.
+    await asyncio.gather(*(companion.start() for companion in companions.values()))
+    say("companions up")
+
+
+def _restart_clocks(
+    clock: Clock, mocks: dict[int, ReplayVehicle], companions: dict[int, Companion]
+) -> float:
+    """Simulated time zero, now that everything is up: the vehicles' and companions' too."""
+    origin = clock.now()
+    for mock in mocks.values():
+        mock.restart_clock(origin)
+    for companion in companions.values():
+        companion.epoch = clock.now()
+    return origin
+
+
+async def _stop_ticker(
+    paced: PacedClock | None, ticker: asyncio.Task[None] | None, say: Callable[[str], None]
+) -> None:
+    """Stop pacing the clock, and say how long it was held back."""
+    if paced is not None and ticker is not None:
+        ticker.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await ticker
+        say(f"clock held back for {paced.lost_s:.1f} real s (stalls, inline computation)")
+
+
 async def run_replay(
     scenario: Scenario,
     *,
@@ -353,67 +456,38 @@ async def run_replay(
     (:mod:`companion.sim.inproc`) on a virtual clock (run it on a
     :class:`~companion.radio.clock.VirtualTimeLoop`: :func:`run_virtual`)."""
     _check(scenario, px4, virtual=virtual)
-    ts = scenario.time_scale if px4 is None else min(scenario.time_scale, px4_speed_max)
-    # Mocks fly on a clock paced by this process (a busy machine does not pass as flight
-    # time); PX4 SITL keeps lock-step real time, so with it the plain scaled clock; a virtual
-    # replay's clock is its loop's, and every step's CPU passes as link time.
-    paced = PacedClock(ts) if px4 is None and not virtual else None
-    clock = paced or (Clock(charges_cpu=True) if virtual else Clock(ts))
-    medium = SimMedium(Channel(Impairments(loss=scenario.loss), scenario.seed), clock)
-    link = profile(scenario.link_profile)
+    ts, paced, clock = _clock(scenario, px4, px4_speed_max, virtual=virtual)
+    radio = _radio(scenario, clock)
     mocks: dict[int, ReplayVehicle] = {}
     companions: dict[int, Companion] = {}
     vanished: dict[int, Companion] = {}
     autopilots: list[AutopilotBase] = []
-    flight = FlightModel(
-        cruise_m_s=scenario.cruise_m_s,
-        time_scale=1.0 if virtual else ts,
-        rate_hz=VIRTUAL_RATE_HZ if virtual else 20.0,
-    )
     origin = clock.now()  # simulated time zero for every vehicle and the schedule
     state = tempfile.TemporaryDirectory(prefix="replay-state-")
-    fleet = make_fleet(
-        [(d.id, d.operator) for d in scenario.drones],
-        Path(state.name),
-        untrusted=scenario.untrusted_operators,
-        unknown=scenario.unknown_peers,
-    )
-
-    def say(message: str) -> None:
-        if progress:
-            print(f"  ... {message}", file=sys.stderr, flush=True)
-
+    fleet = _fleet(scenario, Path(state.name))
+    say = _sayer(progress)
     ticker = spawn(paced.tick(), name="paced-clock", log=log) if paced is not None else None
     try:
-        for d in scenario.drones:
-            vehicle = _vehicle(d, scenario, px4, ts, flight, clock, virtual=virtual)
-            mocks[d.id] = vehicle
-            await vehicle.start(origin)
-            ap = await _autopilot(vehicle, d)
-            autopilots.append(ap)
-            settings = _settings(d, scenario, vehicle.api_url)
-            endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
-            companions[d.id] = Companion(settings, endpoint, ap, fleet[d.id])
-            via = "MAVSDK" if isinstance(ap, Autopilot) else "no MAVLink"
-            say(f"drone {d.id}: {vehicle.kind} vehicle up ({via})")
-        # The companions start together: one set up earlier would have the radio (and its
-        # first runs) to itself while the others' vehicles still start.
-        await asyncio.gather(*(companion.start() for companion in companions.values()))
-        say("companions up")
-        origin = clock.now()  # simulated time zero: everything is up
-        for mock in mocks.values():
-            mock.restart_clock(origin)
-        for companion in companions.values():
-            companion.epoch = clock.now()
+        await _bring_up(
+            scenario,
+            px4,
+            ts,
+            clock,
+            radio,
+            origin,
+            fleet,
+            say,
+            virtual=virtual,
+            mocks=mocks,
+            companions=companions,
+            autopilots=autopilots,
+        )
+        origin = _restart_clocks(clock, mocks, companions)
         script = _Script(scenario, mocks, companions, vanished, say)
         done = await script.fly(clock, origin, virtual=virtual)
     finally:
         held = await _shut_down(companions, autopilots, mocks, say)
-        if paced is not None and ticker is not None:
-            ticker.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await ticker
-            say(f"clock held back for {paced.lost_s:.1f} real s (stalls, inline computation)")
+        await _stop_ticker(paced, ticker, say)
         state.cleanup()
     baseline = _fly_offline(scenario)
     return Replay(

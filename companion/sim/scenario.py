@@ -104,47 +104,7 @@ def load_scenario(path: str | Path) -> Scenario:
     link_profile = link.text("profile", "us915-sf7", list(PROFILES))
     loss = link.number("loss", 0.0, low=0.0, high=MAX_LOSS)
     seed = link.optional_integer("seed", low=0)
-    raw_drones = doc.tables("drone", "drone")
-    if len(raw_drones) < 2:
-        raise doc.fail("at least two [[drone]] tables are needed")
-    drones, ids = [], set()
-    for raw in raw_drones:
-        ident = raw.integer("id", low=1, high=0xFFFE)
-        if ident in ids:
-            raise raw.fail(f"{ident} is taken by another drone", "id")
-        ids.add(ident)
-        kind = raw.text("autopilot", "px4", ("px4", "ardupilot"))
-        mission_file = raw.text("mission")
-        mission_path = path.parent / mission_file
-        if not mission_path.is_file():
-            what = "is a directory" if mission_path.is_dir() else "does not exist"
-            raise raw.fail(
-                f"{mission_file} {what} (paths are relative to the scenario's folder)",
-                "mission",
-            )
-        try:
-            plan = read_mission_file(mission_path)  # errors name the file
-        except MissionError as exc:
-            raise raw.fail(str(exc)) from None
-        try:
-            if plan.home is None:
-                raise MissionError("the mission file gives no home")
-            items = plan.for_autopilot(ardupilot=kind == "ardupilot")
-            flight_path(items, plan.home_degE7, ardupilot=kind == "ardupilot")  # jumps valid
-        except MissionError as exc:
-            raise raw.fail(f"{mission_file}: {exc}") from None
-        drones.append(
-            DroneSpec(
-                ident,
-                items,
-                plan.home,
-                raw.number("takeoff_delay_s", 0.0, low=0.0),
-                kind == "ardupilot",
-                hold_for_comparisons=raw.flag("hold_for_comparisons", True),
-                operator=raw.text("operator", "fleet"),
-                pause=_pause(raw),
-            )
-        )
+    drones = _drones(doc, path)
     failsafe = doc.text("failsafe", "climb", [a.value for a in Action])
     untrusted = doc.strings("untrusted_operators")
     if not {d.operator for d in drones} - set(untrusted):
@@ -172,6 +132,64 @@ def load_scenario(path: str | Path) -> Scenario:
     )
     doc.finish()
     return scenario
+
+
+def _drones(doc: Table, path: Path) -> list[DroneSpec]:
+    """The ``[[drone]]`` tables: at least two, each with an id of its own."""
+    raw_drones = doc.tables("drone", "drone")
+    if len(raw_drones) < 2:
+        raise doc.fail("at least two [[drone]] tables are needed")
+    drones, ids = [], set()
+    for raw in raw_drones:
+        ident = raw.integer("id", low=1, high=0xFFFE)
+        if ident in ids:
+            raise raw.fail(f"{ident} is taken by another drone", "id")
+        ids.add(ident)
+        drones.append(_drone(raw, ident, path))
+    return drones
+
+
+def _drone(raw: Table, ident: int, path: Path) -> DroneSpec:
+    """One ``[[drone]]`` table (its id read already), its mission read and checked."""
+    kind = raw.text("autopilot", "px4", ("px4", "ardupilot"))
+    items, home = _mission(raw, path, ardupilot=kind == "ardupilot")
+    return DroneSpec(
+        ident,
+        items,
+        home,
+        raw.number("takeoff_delay_s", 0.0, low=0.0),
+        kind == "ardupilot",
+        hold_for_comparisons=raw.flag("hold_for_comparisons", True),
+        operator=raw.text("operator", "fleet"),
+        pause=_pause(raw),
+    )
+
+
+def _mission(
+    raw: Table, path: Path, *, ardupilot: bool
+) -> tuple[list[MissionItem], tuple[float, float, float]]:
+    """A drone's mission file (relative to the scenario ``path``): its items for the
+    autopilot, their flown path valid, and its home."""
+    mission_file = raw.text("mission")
+    mission_path = path.parent / mission_file
+    if not mission_path.is_file():
+        what = "is a directory" if mission_path.is_dir() else "does not exist"
+        raise raw.fail(
+            f"{mission_file} {what} (paths are relative to the scenario's folder)",
+            "mission",
+        )
+    try:
+        plan = read_mission_file(mission_path)  # errors name the file
+    except MissionError as exc:
+        raise raw.fail(str(exc)) from None
+    try:
+        if plan.home is None:
+            raise MissionError("the mission file gives no home")
+        items = plan.for_autopilot(ardupilot=ardupilot)
+        flight_path(items, plan.home_degE7, ardupilot=ardupilot)  # jumps valid
+    except MissionError as exc:
+        raise raw.fail(f"{mission_file}: {exc}") from None
+    return items, plan.home
 
 
 def _pause(raw: Table) -> tuple[float, float] | None:

@@ -36,7 +36,7 @@ for Alice's vertices against Bob's.  The pair then conflicts when also its altit
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from protocol.circuits.boolean import Circuit
@@ -128,68 +128,112 @@ def volume_hits(
     only when segment 0 is a link (never a hit), to answer *meets* everywhere
     (:class:`protocol.geo.geometry.BobPath`)."""
     if capsules is None:
-
-        def pair(i: int, k: int) -> int:
-            return segments_meet(
-                c, o1[i][k], o1[i][k + 1], o3[i][k], o3[i + 1][k], proj[i][k], proj[i][k + 1]
-            )
+        pair = _exact_pair(c, o1, proj, o3)
     else:
-        caps = capsules
-        # Bob's vertex k in the slab of Alice's segment i; Alice's vertex j in Bob's segment k's
-        slab_a = [
-            [
-                c.and_all(
-                    [
-                        c.not_(proj[i][k].low),
-                        c.not_(proj[i][k].high),
-                        caps.near1[i][k].ge,
-                        caps.near1[i][k].le,
-                    ]
-                )
-                for k in range(n + 1)
-            ]
-            for i in range(m)
-        ]
-        slab_b = [
-            [
-                c.and_all(
-                    [
-                        caps.along3[j][k].ge,
-                        caps.along3[j][k].le,
-                        caps.near3[j][k].ge,
-                        caps.near3[j][k].le,
-                    ]
-                )
-                for k in range(n)
-            ]
-            for j in range(m + 1)
-        ]
-
-        def pair(i: int, k: int) -> int:
-            return c.or_all(
-                [
-                    crosses(c, o1[i][k], o1[i][k + 1], o3[i][k], o3[i + 1][k]),
-                    caps.disc[i][k],
-                    caps.disc[i][k + 1],
-                    caps.disc[i + 1][k],
-                    caps.disc[i + 1][k + 1],
-                    slab_a[i][k],
-                    slab_a[i][k + 1],
-                    slab_b[i][k],
-                    slab_b[i + 1][k],
-                ]
-            )
-
+        pair = _capsule_pair(c, m, n, o1, proj, o3, capsules)
     hits = []
     for i in range(m):
-        pairs = []
-        for k in range(n):
-            conditions = [pair(i, k)]
-            for ranges in (bands, windows):
-                if ranges is not None:
-                    conditions += [ranges[i][k].ge, ranges[i][k].le]
-            pairs.append(c.and_all(conditions))
+        pairs = [_conflict(c, pair(i, k), bands, windows, i, k) for k in range(n)]
         if flag is not None:
             pairs[0] = c.xor(pairs[0], flag)
         hits.append(c.or_all(pairs))
     return hits
+
+
+def _exact_pair(
+    c: Circuit,
+    o1: Sequence[Sequence[Orient]],
+    proj: Sequence[Sequence[Proj]],
+    o3: Sequence[Sequence[Orient]],
+) -> Callable[[int, int], int]:
+    """The pair wire of segments i and k without capsules: :func:`segments_meet`."""
+
+    def pair(i: int, k: int) -> int:
+        return segments_meet(
+            c, o1[i][k], o1[i][k + 1], o3[i][k], o3[i + 1][k], proj[i][k], proj[i][k + 1]
+        )
+
+    return pair
+
+
+def _capsule_pair(
+    c: Circuit,
+    m: int,
+    n: int,
+    o1: Sequence[Sequence[Orient]],
+    proj: Sequence[Sequence[Proj]],
+    o3: Sequence[Sequence[Orient]],
+    caps: Capsules,
+) -> Callable[[int, int], int]:
+    """The pair wire of segments i and k with capsules: a crossing, a vertex pair within r
+    or a vertex in the other's slab (the slab wires are built here, before any pair)."""
+    slab_a, slab_b = _slabs(c, m, n, proj, caps)
+
+    def pair(i: int, k: int) -> int:
+        return c.or_all(
+            [
+                crosses(c, o1[i][k], o1[i][k + 1], o3[i][k], o3[i + 1][k]),
+                caps.disc[i][k],
+                caps.disc[i][k + 1],
+                caps.disc[i + 1][k],
+                caps.disc[i + 1][k + 1],
+                slab_a[i][k],
+                slab_a[i][k + 1],
+                slab_b[i][k],
+                slab_b[i + 1][k],
+            ]
+        )
+
+    return pair
+
+
+def _slabs(
+    c: Circuit, m: int, n: int, proj: Sequence[Sequence[Proj]], caps: Capsules
+) -> tuple[list[list[int]], list[list[int]]]:
+    """The slab wires: Bob's vertex k in the slab of Alice's segment i (``slab_a[i][k]``),
+    Alice's vertex j in Bob's segment k's (``slab_b[j][k]``)."""
+    slab_a = [
+        [
+            c.and_all(
+                [
+                    c.not_(proj[i][k].low),
+                    c.not_(proj[i][k].high),
+                    caps.near1[i][k].ge,
+                    caps.near1[i][k].le,
+                ]
+            )
+            for k in range(n + 1)
+        ]
+        for i in range(m)
+    ]
+    slab_b = [
+        [
+            c.and_all(
+                [
+                    caps.along3[j][k].ge,
+                    caps.along3[j][k].le,
+                    caps.near3[j][k].ge,
+                    caps.near3[j][k].le,
+                ]
+            )
+            for k in range(n)
+        ]
+        for j in range(m + 1)
+    ]
+    return slab_a, slab_b
+
+
+def _conflict(
+    c: Circuit,
+    pair: int,
+    bands: Sequence[Sequence[Range]] | None,
+    windows: Sequence[Sequence[Range]] | None,
+    i: int,
+    k: int,
+) -> int:
+    """The pair wire ANDed with its band and window wires, when given."""
+    conditions = [pair]
+    for ranges in (bands, windows):
+        if ranges is not None:
+            conditions += [ranges[i][k].ge, ranges[i][k].le]
+    return c.and_all(conditions)

@@ -187,7 +187,28 @@ def make_plan(m: int, n: int, grid: GridSpec, digit_bits: int, volumes: VolumeSp
     the larger of both parties')."""
     capsules = volumes.separation.horizontal > 0
     layout = Layout(m, n, capsules=capsules, bands=volumes.bands, windows=volumes.windows)
-    l, r = grid.l, grid.range
+    l = grid.l
+    products = _product_shape(layout, n, l, grid.range)
+    compared = _compared(layout, volumes, l)
+    leaves = LeafShape.of([c.bits for c in compared], digit_bits, [c.thresholds for c in compared])
+    circuit = Circuit()
+    ge, eq = _comparison_wires(circuit, compared, leaves, capsules)
+    wires = _form_wires(circuit, layout, ge, eq, capsules)
+    layout.outputs(
+        circuit,
+        wires,
+        bands=_pair_ranges(layout, ge, _PAIR_TESTS[0], layout.bands),
+        windows=_pair_ranges(layout, ge, _PAIR_TESTS[1], layout.windows),
+    )
+    rots = (products.rots, leaves.rots, rot_count(circuit))
+    return Plan(layout, volumes, l, tuple(compared), products, leaves, circuit, rots)
+
+
+_Key = tuple[Test, int]  # a compared value: its test and index
+
+
+def _product_shape(layout: Layout, n: int, l: int, r: int) -> ProductShape:
+    """The products' shape: Bob's values and, per form, the two values it multiplies."""
     coord_bits, delta_bits = (2 * r).bit_length(), (4 * r).bit_length()
     # Bob's values: X'_k, Y'_k for k <= n, then dX'_k, dY'_k for k < n.
     value_bits = (coord_bits,) * (2 * (n + 1)) + (delta_bits,) * (2 * n)
@@ -195,12 +216,16 @@ def make_plan(m: int, n: int, grid: GridSpec, digit_bits: int, volumes: VolumeSp
     for position, (kind, _, k) in enumerate(layout.values):
         first = 2 * (n + 1) + 2 * k if kind in (Kind.O3, Kind.T3) else 2 * k
         terms += [(first, position), (first + 1, position)]
-    products = ProductShape(l + 1, value_bits, tuple(terms), len(layout.values))
-    compared = _compared(layout, volumes, l)
-    leaves = LeafShape.of([c.bits for c in compared], digit_bits, [c.thresholds for c in compared])
-    circuit = Circuit()
-    ge: dict[tuple[Test, int], list[int]] = {}
-    eq: dict[tuple[Test, int], int] = {}
+    return ProductShape(l + 1, value_bits, tuple(terms), len(layout.values))
+
+
+def _comparison_wires(
+    circuit: Circuit, compared: list[Compared], leaves: LeafShape, capsules: bool
+) -> tuple[dict[_Key, list[int]], dict[_Key, int]]:
+    """The comparison trees of every compared value: its [>= threshold] wires, and the EQ
+    wire where the exact crossing needs it."""
+    ge: dict[_Key, list[int]] = {}
+    eq: dict[_Key, int] = {}
     for c, widths in zip(compared, leaves.digits, strict=True):
         # EQ of the first threshold, [v = 0]: for the exact crossing only
         exact = c.test in (Test.O1, Test.O3) and not capsules
@@ -216,6 +241,17 @@ def make_plan(m: int, n: int, grid: GridSpec, digit_bits: int, volumes: VolumeSp
             root_eq = roots[0].eq
             assert root_eq is not None
             eq[c.test, c.index] = root_eq
+    return ge, eq
+
+
+def _form_wires(
+    circuit: Circuit,
+    layout: Layout,
+    ge: dict[_Key, list[int]],
+    eq: dict[_Key, int],
+    capsules: bool,
+) -> list[Wires]:
+    """The path circuit's input wires of every form, from its comparison wires."""
     wires: list[Wires] = []
     for position, (kind, _, _) in enumerate(layout.values):
         if kind is Kind.O1:
@@ -237,21 +273,17 @@ def make_plan(m: int, n: int, grid: GridSpec, digit_bits: int, volumes: VolumeSp
             wires.append(Wires(near=Range(ge[Test.T3, position][0], circuit.not_(high))))
         else:
             wires.append(Wires(disc=circuit.not_(ge[Test.D, position][0])))
+    return wires
 
-    def ranges(tests: tuple[Test, Test], on: bool) -> list[Range] | None:
-        if not on:
-            return None
-        low, high = tests
-        return [Range(ge[low, p][0], ge[high, p][0]) for p in range(len(layout.pairs()))]
 
-    layout.outputs(
-        circuit,
-        wires,
-        bands=ranges(_PAIR_TESTS[0], layout.bands),
-        windows=ranges(_PAIR_TESTS[1], layout.windows),
-    )
-    rots = (products.rots, leaves.rots, rot_count(circuit))
-    return Plan(layout, volumes, l, tuple(compared), products, leaves, circuit, rots)
+def _pair_ranges(
+    layout: Layout, ge: dict[_Key, list[int]], tests: tuple[Test, Test], on: bool
+) -> list[Range] | None:
+    """The band (window) wires of every segment pair, or None when the run has none."""
+    if not on:
+        return None
+    low, high = tests
+    return [Range(ge[low, p][0], ge[high, p][0]) for p in range(len(layout.pairs()))]
 
 
 def message_sizes(

@@ -209,6 +209,28 @@ class PaperAlice(AliceSide):
     def _on_keys(self, body: bytes) -> bytes:
         reader = Reader(body)
         self.n = self.limits.peer_size(reader.uint(2))
+        self._read_keys(reader, body)
+        self.w = slot_bits(self.l, self.kappa)
+        per = max(1, (self.paillier.n.bit_length() - 1) // self.w)
+        self.layout = Layout(self.m, self.n)
+        self.packing = packing = Packing(self.m, self.n, per)
+        vectors = [self.paillier.read_ciphertext(reader) for _ in range(packing.bob_vectors)]
+        reader.finish()
+        packed, thresholds = self._pack_forms(vectors)
+        self.comparison = ComparisonAlice(
+            self.paillier,
+            self.dgk,
+            self.l,
+            self.kappa,
+            packed,
+            thresholds,
+            insecure_for_tests=self.insecure,
+        )
+        self.circuit, _ = make_circuit(self.layout, packing)
+        return frame(MsgType.MASKED, 3, self.comparison.mask().to_bytes())
+
+    def _read_keys(self, reader: Reader, body: bytes) -> None:
+        """Bob's Paillier and DGK keys, checked, and the proof on his Paillier key."""
         start = reader.offset
         paillier_key = take_blob(reader)
         if len(paillier_key) > MAX_MODULUS_BITS // 8:
@@ -221,12 +243,13 @@ class PaperAlice(AliceSide):
         self.guard_bytes = 2 + len(proof)
         if 3 * self.l + 3 >= self.dgk.plaintext_modulus:
             raise RemoteProtocolError("peer's DGK plaintext space is too small")
-        self.w = slot_bits(self.l, self.kappa)
-        per = max(1, (self.paillier.n.bit_length() - 1) // self.w)
-        self.layout = Layout(self.m, self.n)
-        self.packing = packing = Packing(self.m, self.n, per)
-        vectors = [self.paillier.read_ciphertext(reader) for _ in range(packing.bob_vectors)]
-        reader.finish()
+
+    def _pack_forms(
+        self, vectors: list[PaillierCiphertext]
+    ) -> tuple[list[PackedValues], list[list[int]]]:
+        """Every value as a linear form in Bob's vectors, packed per Paillier plaintext, and
+        its two thresholds."""
+        packing = self.packing
         nv, ns = len(packing.vertex_chunks), len(packing.segment_chunks)
         x, y = vectors[:nv], vectors[nv : 2 * nv]
         dx, dy, kk = (
@@ -263,17 +286,7 @@ class PaperAlice(AliceSide):
             [0, proj_rows[row][3] + 1] if kind is Kind.T else [0, 1]
             for kind, row, _ in packing.values
         ]
-        self.comparison = ComparisonAlice(
-            self.paillier,
-            self.dgk,
-            self.l,
-            self.kappa,
-            packed,
-            thresholds,
-            insecure_for_tests=self.insecure,
-        )
-        self.circuit, _ = make_circuit(self.layout, packing)
-        return frame(MsgType.MASKED, 3, self.comparison.mask().to_bytes())
+        return packed, thresholds
 
     # message 4 -> 5
     def _on_bits(self, body: bytes) -> bytes:

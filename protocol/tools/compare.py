@@ -133,24 +133,7 @@ def load_cases(
     if a_plan != b_plan:
         raise InputFormatError("both files must be missions, or both in the paper's format")
     if a_plan:
-        if read_mission is None:
-            raise InputFormatError(
-                f"{alice_file}: mission files are compared as the autopilot flies them by "
-                "`python -m companion compare` (this command reads the paper's format)"
-            )
-        a_geo, b_geo = read_mission(Path(alice_file)), read_mission(Path(bob_file))
-        for path, geo in ((alice_file, a_geo), (bob_file, b_geo)):
-            if len(geo) < 2:
-                raise InputFormatError(f"{path}: the mission flies no segment")
-        lat, lon = a_geo[0]
-        if range_ is not None:
-            grid = GridSpec(GridKind.GEO, range_, lat, lon, resolution_mm)
-        else:
-            radius = radius_m
-            while not grid_holds(lat, lon, radius, a_geo + b_geo):
-                radius *= 2
-            grid = GridSpec.geo(lat, lon, resolution_mm=resolution_mm, radius_m=radius)
-        return [Case.of(grid.project_path(a_geo), b_geo, grid, bob_geographic=True)]
+        return _mission_cases(alice_file, bob_file, range_, resolution_mm, radius_m, read_mission)
     a_lines = parse_paper_text(a_text, str(alice_file))
     b_lines = parse_paper_text(b_text, str(bob_file))
     if len(a_lines) != len(b_lines):
@@ -173,14 +156,49 @@ def load_cases(
     for a, b in pairs:
         grid.check_points(a.points)
         grid.check_points(b.points)
+    volumes = _volumes_of(pairs, separation)
+    return [Case(a, b, grid, volumes=volumes, bob_separation=separation) for a, b in pairs]
+
+
+def _mission_cases(
+    alice_file: str | Path,
+    bob_file: str | Path,
+    range_: int | None,
+    resolution_mm: int,
+    radius_m: float,
+    read_mission: MissionReader | None,
+) -> list[Case]:
+    """:func:`load_cases` of two mission files: one case, on a grid centred on Alice's first
+    point (``range_``, or doubling ``radius_m`` until it holds both paths)."""
+    if read_mission is None:
+        raise InputFormatError(
+            f"{alice_file}: mission files are compared as the autopilot flies them by "
+            "`python -m companion compare` (this command reads the paper's format)"
+        )
+    a_geo, b_geo = read_mission(Path(alice_file)), read_mission(Path(bob_file))
+    for path, geo in ((alice_file, a_geo), (bob_file, b_geo)):
+        if len(geo) < 2:
+            raise InputFormatError(f"{path}: the mission flies no segment")
+    lat, lon = a_geo[0]
+    if range_ is not None:
+        grid = GridSpec(GridKind.GEO, range_, lat, lon, resolution_mm)
+    else:
+        radius = radius_m
+        while not grid_holds(lat, lon, radius, a_geo + b_geo):
+            radius *= 2
+        grid = GridSpec.geo(lat, lon, resolution_mm=resolution_mm, radius_m=radius)
+    return [Case.of(grid.project_path(a_geo), b_geo, grid, bob_geographic=True)]
+
+
+def _volumes_of(pairs: Sequence[tuple[Route, Route]], separation: Separation) -> VolumeSpec:
+    """The runs' volumes: ``separation``, and altitude and time ranges the routes' extent."""
     bands = [x for a, b in pairs for route in (a, b) for x in route.bands or ()]
     windows = [x for a, b in pairs for route in (a, b) for x in route.windows or ()]
-    volumes = VolumeSpec(
+    return VolumeSpec(
         separation,
         z_range=max((max(abs(lo), abs(hi)) for lo, hi in bands), default=0) or int(bool(bands)),
         t_range=max((hi for _, hi in windows), default=0) or int(bool(windows)),
     )
-    return [Case(a, b, grid, volumes=volumes, bob_separation=separation) for a, b in pairs]
 
 
 @dataclass

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import TypeVar
 
+from protocol.circuits.boolean import Circuit
 from protocol.compact.gmw import Gmw, rot_count
 from protocol.compact.millionaire import LeavesAlice, LeavesBob, Shape, comparison_circuit
 from protocol.intersection import Alice, Bob
@@ -147,47 +148,78 @@ def run_millionaires(
     circuit = comparison_circuit(shape, need_eq=need_eq)
     total = shape.rots + rot_count(circuit)
     nonce = secrets.token_bytes(32)
-
-    def bob_first() -> tuple[bytes, LeavesBob, ChooserRots]:
-        message, rots = chooser_extend(chooser, nonce, total)
-        leaves = LeavesBob(
-            shape, bob_values, ChooserRots(rots.choices[: shape.rots], rots.keys[: shape.rots])
-        )
-        triples = ChooserRots(rots.choices[shape.rots :], rots.keys[shape.rots :])
-        return message + leaves.corrections(), leaves, triples
-
-    wire, bob_leaves, bob_triples = t.bob(bob_first)
+    wire, bob_leaves, bob_triples = t.bob(
+        partial(_bob_extend, chooser, nonce, total, shape, bob_values)
+    )
     t.send("extension+digits", wire, from_alice=False)
     split = len(wire) - shape.correction_size()
-
-    def alice_first() -> tuple[bytes, Gmw]:
-        rots = holder_extend(holder, nonce, total, wire[:split])
-        leaves = LeavesAlice(
-            shape, alice_values, HolderRots(rots.keys0[: shape.rots], rots.keys1[: shape.rots])
-        )
-        tables, shares = leaves.tables(wire[split:])
-        inputs = [bit for v in shares for th in v for pair in th for bit in pair]
-        gmw = Gmw(
-            circuit,
-            alice=True,
-            rots=HolderRots(rots.keys0[shape.rots :], rots.keys1[shape.rots :]),
-            inputs=inputs,
-        )
-        return tables + gmw.send(), gmw
-
-    wire, alice_gmw = t.alice(alice_first)
+    wire, alice_gmw = t.alice(
+        partial(_alice_tables, holder, nonce, total, shape, alice_values, circuit, wire, split)
+    )
     t.send("tables", wire, from_alice=True)
     size = shape.table_size()
-
-    def bob_tables() -> tuple[bytes, Gmw]:
-        shares = bob_leaves.shares(wire[:size])
-        inputs = [bit for v in shares for th in v for pair in th for bit in pair]
-        gmw = Gmw(circuit, alice=False, rots=bob_triples, inputs=inputs)
-        gmw.receive(wire[size:])
-        return gmw.send(), gmw
-
-    wire, bob_gmw = t.bob(bob_tables)
+    wire, bob_gmw = t.bob(partial(_bob_tables, bob_leaves, bob_triples, circuit, wire, size))
     t.send("round", wire, from_alice=False)
+    _gmw_rounds(t, alice_gmw, bob_gmw, wire)
+    return alice_gmw.outputs(), t
+
+
+def _share_bits(shares: list[list[list[tuple[int, int]]]]) -> list[int]:
+    """The leaves' shares as GMW inputs: per value, per threshold, per digit (gt, eq)."""
+    return [bit for v in shares for th in v for pair in th for bit in pair]
+
+
+def _bob_extend(
+    chooser: ChooserSetup, nonce: bytes, total: int, shape: Shape, bob_values: Sequence[int]
+) -> tuple[bytes, LeavesBob, ChooserRots]:
+    """Bob's first step: the OT extension and his digits' corrections, his leaves and the
+    random OTs left for the GMW triples."""
+    message, rots = chooser_extend(chooser, nonce, total)
+    leaves = LeavesBob(
+        shape, bob_values, ChooserRots(rots.choices[: shape.rots], rots.keys[: shape.rots])
+    )
+    triples = ChooserRots(rots.choices[shape.rots :], rots.keys[shape.rots :])
+    return message + leaves.corrections(), leaves, triples
+
+
+def _alice_tables(
+    holder: HolderSetup,
+    nonce: bytes,
+    total: int,
+    shape: Shape,
+    alice_values: Sequence[Sequence[int]],
+    circuit: Circuit,
+    wire: bytes,
+    split: int,
+) -> tuple[bytes, Gmw]:
+    """Alice's first step: the OT extension from Bob's message, the leaves' tables and her
+    first GMW message."""
+    rots = holder_extend(holder, nonce, total, wire[:split])
+    leaves = LeavesAlice(
+        shape, alice_values, HolderRots(rots.keys0[: shape.rots], rots.keys1[: shape.rots])
+    )
+    tables, shares = leaves.tables(wire[split:])
+    gmw = Gmw(
+        circuit,
+        alice=True,
+        rots=HolderRots(rots.keys0[shape.rots :], rots.keys1[shape.rots :]),
+        inputs=_share_bits(shares),
+    )
+    return tables + gmw.send(), gmw
+
+
+def _bob_tables(
+    leaves: LeavesBob, triples: ChooserRots, circuit: Circuit, wire: bytes, size: int
+) -> tuple[bytes, Gmw]:
+    """Bob's second step: his shares from Alice's tables, then his first GMW message."""
+    shares = leaves.shares(wire[:size])
+    gmw = Gmw(circuit, alice=False, rots=triples, inputs=_share_bits(shares))
+    gmw.receive(wire[size:])
+    return gmw.send(), gmw
+
+
+def _gmw_rounds(t: Transcript, alice_gmw: Gmw, bob_gmw: Gmw, wire: bytes) -> None:
+    """The GMW rounds after Bob's first message ``wire``, until Alice has her outputs."""
     current, other = alice_gmw, bob_gmw
     while not alice_gmw.finished:
         message = wire
@@ -198,4 +230,3 @@ def run_millionaires(
         wire = t_account(current.send)
         t.send("round", wire, from_alice=current is alice_gmw)
         current, other = other, current
-    return alice_gmw.outputs(), t

@@ -13,22 +13,16 @@ from pathlib import Path
 
 import pytest
 
-from companion.app.core import box_radius_m
 from companion.app.runtime import Companion, CompanionSettings
 from companion.mission.files import read_plan
 from companion.mission.flightpath import flight_path
+from companion.mission.ground import cut_at, distance_m, near_cut, reached_within
 from companion.mission.items import MissionItem
 from companion.mission.levels import NoClearAltitude, Slots, clear_raise, plan_raises
+from companion.mission.own_flight import box_radius_m
 from companion.mission.planner import plan_offsets
 from companion.neighbours.beacon import Beacon
-from companion.neighbours.peers import (
-    Peer,
-    cut_at,
-    distance_m,
-    near_cut,
-    reached_within,
-    time_to_meet,
-)
+from companion.neighbours.peers import Peer, time_to_meet
 from companion.radio import PROFILES
 from companion.radio.airtime import DutyCycle
 from companion.radio.clock import Clock
@@ -74,7 +68,7 @@ def alone(items: list[MissionItem], clock: Clock) -> tuple[Companion, FakeAutopi
         autopilot,  # type: ignore[arg-type]
         make_fleet([(1, "fleet")], state)[1],
     )
-    c.original = c.mission = list(items)
+    c.flight.load(list(items), None)
     return c, autopilot
 
 
@@ -336,22 +330,21 @@ def _guarded(busy_s: float, raised: bool = False) -> tuple[Companion, FakeAutopi
     async def main() -> tuple[Companion, FakeAutopilot]:
         clock = Clock()
         c, autopilot = alone(items, clock)
-        c.path = flight_path(items, None)
         c.vehicle.relative_alt, c.vehicle.current_item, c.vehicle.speed_m_s = (
             30.0,
             2,
             10.0,
         )  # airborne, segment 0
-        (lat, west), (_, east_) = c.path.points[:2]  # -600 and -250 m: half-way, flying east
+        (lat, west), (_, east_) = c.flight.path.points[:2]  # -600 and -250 m: half-way, flying east
         c.vehicle.position = (lat, (west + east_) // 2, 518.0)
         south = (C_LAT - round(800 / M_PER_E7_LAT), C_LON)
-        c.peers[2] = Peer(
+        c.neighbourhood.peers[2] = Peer(
             2, beacon(south), heard_at=clock.now(), conflicts={1} if raised else set()
         )
         if raised:
-            c.raises = {1: 15.0}
-        c._running = (3, clock.now() + busy_s)
-        guard = asyncio.create_task(c._guard())
+            c.flight.raises = {1: 15.0}
+        c.guard.running = (3, clock.now() + busy_s)
+        guard = asyncio.create_task(c.guard.guard())
         await clock.sleep(5.0)
         guard.cancel()
         return c, autopilot
@@ -372,7 +365,7 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None
     (event,) = actions
     assert event.detail["waiting"] and event.detail["peer"] == 2
     assert 1 in event.detail["segments"]  # the leg over the crossing
-    assert companion.raises.get(1, 0) >= 10.0 and autopilot.uploads  # climbed clear of it
+    assert companion.flight.raises.get(1, 0) >= 10.0 and autopilot.uploads  # climbed clear of it
 
 
 def test_guard_leaves_a_leg_already_raised_for_the_peer() -> None:
@@ -395,7 +388,7 @@ def test_asking_an_unchecked_drone_backs_off_to_30_seconds_at_most() -> None:
         c, _ = alone(items, clock)
         asks = []
         for _ in range(400):
-            if c._may_ask(9):
+            if c.neighbourhood.may_ask(9):
                 asks.append(clock.now())
             await clock.sleep(1.0)
         return asks
@@ -418,11 +411,10 @@ def test_edit_is_built_on_the_held_mission_and_keeps_the_current_item() -> None:
 
     async def main(vehicle: list[MissionItem]) -> tuple[Companion, FakeAutopilot]:
         c, autopilot = alone(vehicle, Clock())
-        c.original = c.mission = list(items)
-        c.path = flight_path(items, None)
+        c.flight.load(list(items), None)
         c.vehicle.relative_alt, c.vehicle.current_item = 30.0, 2
-        c.precaution[2] = {2}
-        await c._replan("test")
+        c.edits.precaution[2] = {2}
+        await c.edits.replan("test")
         return c, autopilot
 
     _, autopilot = run_simulated(main(held))
@@ -436,21 +428,31 @@ def test_edit_is_built_on_the_held_mission_and_keeps_the_current_item() -> None:
 
 def test_a_failed_task_is_logged_and_recorded(caplog: pytest.LogCaptureFixture) -> None:
     """A spawned task that raises is not lost: its traceback is logged and the companion
-    records ``task_failed`` (a replay with one fails)."""
+    records ``task_failed`` (a replay with one fails) -- and it ends neither the companion's
+    task group nor its other tasks; a stop ends them all."""
 
-    async def main() -> Companion:
+    async def main() -> tuple[Companion, bool, bool, bool]:
         c, _ = alone(survey(4), Clock(1.0))
+        await c.endpoint.start()
+        await c.start_radio()
 
         async def broken() -> None:
             raise RuntimeError("boom")
 
-        c._spawn(broken())
+        async def steady() -> None:
+            await asyncio.sleep(3600)
+
+        other = c.spawn(steady(), "steady")
+        failed = c.spawn(broken(), "broken")
         await asyncio.sleep(0.01)
-        return c
+        alive = c.running and not other.done() and failed.done()
+        await c.stop()
+        return c, alive, other.cancelled(), c.running
 
     with caplog.at_level(logging.ERROR, logger="companion"):
-        c = asyncio.run(main())
+        c, alive, cancelled, running = asyncio.run(main())
     (event,) = [e for e in c.events if e.kind == "task_failed"]
-    assert "boom" in event.detail["error"]
+    assert "boom" in event.detail["error"] and event.detail["task"] == "broken"
     assert any(r.exc_info and "boom" in str(r.exc_info[1]) for r in caplog.records)
-    assert not c._children  # and it is gone from the running ones
+    assert alive  # the group and the other task went on
+    assert cancelled and not running  # stopped: every task of the group ended

@@ -12,7 +12,7 @@ from companion.events import (
     Precaution,
     RunResult,
 )
-from companion.runs.roles import Phase
+from companion.roles import Phase
 
 
 def test_failed_is_set_membership_and_covers_every_failure_kind() -> None:

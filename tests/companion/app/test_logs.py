@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from companion.app import logs
+from companion import logs
 
 
 @pytest.fixture

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 from companion.app.config import ConfigError, LinkSettings, load_config
-from companion.app.core import CompanionSettings
 from companion.mission.files import format_wpl
+from companion.settings import CompanionSettings
 from protocol.tools.cli import write_atomic
 from tests.companion.missions import HOME, survey
 

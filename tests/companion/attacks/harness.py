@@ -15,7 +15,6 @@ from companion.auth.beacon_keys import BeaconKeys
 from companion.auth.session import Initiator, Route
 from companion.auth.trust import UnknownPeers
 from companion.mission.files import read_plan
-from companion.mission.flightpath import flight_path
 from companion.mission.items import MissionItem
 from companion.mission.levels import Slots
 from companion.neighbours.beacon import Beacon, CertBeacon
@@ -219,16 +218,14 @@ async def world(
             creds[node],
         )
         home_e7 = (round(home[0] * 1e7), round(home[1] * 1e7))
-        c.original = c.mission = list(items)
-        c.home = (*home_e7, home[2])
-        c.path = flight_path(items, home_e7)
+        c.flight.load(list(items), (*home_e7, home[2]))
         c.vehicle.position = (*home_e7, home[2])
         c.epoch = clock.now()
         drones[node], autopilots[node], taps[node] = c, autopilot, tap
     w = World(clock, medium, sniffer, drones, autopilots, taps, creds)
     for c in drones.values():
         await c.endpoint.start()
-        c.start_radio()
+        await c.start_radio()
     return w
 
 

@@ -9,9 +9,9 @@ from typing import Any
 
 import pytest
 
-from companion.app.core import CompanionSettings
 from companion.auth.session import Refusal
 from companion.runs.exchange import PeerRefused
+from companion.settings import CompanionSettings
 from companion.sim.virtual_time import run_simulated
 from protocol.geo.grid import GridSpec
 from protocol.messages import Suite

@@ -39,7 +39,7 @@ def test_the_world_works_unattacked(tmp_path: Path) -> None:
     (result,) = w.events(1, "result")
     assert result["flagged"] == [0] and w.events(1, "uploaded") and w.autopilots[1].uploads
     assert w.events(2, "answered") and not w.events(2, "refused")
-    assert not w.drones[1].rejected and not w.drones[2].rejected
+    assert not w.drones[1].neighbourhood.rejected and not w.drones[2].neighbourhood.rejected
 
 
 def test_abort_probe_learns_nothing_from_where_bobs_path_lies(tmp_path: Path) -> None:
@@ -136,7 +136,7 @@ def test_a_recorded_run_request_is_refused_by_a_fresh_bob(
         fresh = await restart(w, 2)
         for _ in range(120):  # until the new companion knows drone 1 (its beacons)
             await w.clock.sleep(10)
-            if 1 in fresh.peers:
+            if 1 in fresh.neighbourhood.peers:
                 break
         used = fresh.store.count_runs(0, "bob")
         for _ in range(5):  # played again as it was (again, if a frame was lost)
@@ -168,15 +168,10 @@ async def restart(w: World, node: int) -> Any:
         w.autopilots[node],  # type: ignore[arg-type]
         w.credentials[node],
     )
-    c.original = c.mission = list(old.original)
-    c.home, c.path, c.vehicle.position, c.epoch = (
-        old.home,
-        old.path,
-        old.vehicle.position,
-        w.clock.now(),
-    )
+    c.flight.load(list(old.flight.original), old.flight.home, old.flight.path)
+    c.vehicle.position, c.epoch = old.vehicle.position, w.clock.now()
     await c.endpoint.start()
-    c.start_radio()
+    await c.start_radio()
     w.drones[node] = c
     return c
 
@@ -201,7 +196,7 @@ def test_a_spliced_session_fails(tmp_path: Path) -> None:
             return frame
 
         w.taps[2].rewrite = splice
-        peer = w.drones[1].peers[2]
+        peer = w.drones[1].neighbourhood.peers[2]
         peer.compared, peer.plan = None, []  # drone 1 compares again
         await w.clock.sleep(300)
         await w.stop()
@@ -259,7 +254,7 @@ def test_a_request_beyond_a_fair_run_is_refused_before_any_work(
         outcomes: list[Any] = []
         for segments, radius_m, resolution_mm in ((256, 64_000.0, 100), (16, 2_000.0, 2000)):
             grid = GridSpec.geo(*here, radius_m=radius_m, resolution_mm=resolution_mm)
-            n = w.drones[2]._own_size()
+            n = w.drones[2].flight.own_size()
             outcomes.append(run_work(segments, n, grid.range) > MAX_RUN_WORK)
             path = tuple((k, k % 2) for k in range(segments + 1))
             try:
@@ -302,7 +297,7 @@ def test_a_forged_refusal_changes_nothing_but_the_run(tmp_path: Path) -> None:
         return w
 
     w = run(main())
-    assert w.drones[1].peers[2].role == "alice" and not w.events(1, "yielded")
+    assert w.drones[1].neighbourhood.peers[2].role == "alice" and not w.events(1, "yielded")
     assert any("auth" in f for f in w.events(1, "run_failed"))  # the forged refusal
     assert w.events(1, "result") and w.autopilots[1].uploads  # in the end
 
@@ -310,9 +305,9 @@ def test_a_forged_refusal_changes_nothing_but_the_run(tmp_path: Path) -> None:
 def last_of_bob(w: World) -> int:
     """The link seq of drone 2's last message in drone 1's run with it."""
     alice, bob = w.drones[1], w.drones[2]
-    _, path = alice._remaining_path()
-    n = len(bob._remaining_path()[1]) - 1
-    sizes = message_sizes(len(path) - 1, n, alice._grid(path), fresh_setup=True)
+    _, path = alice.flight.remaining_path()
+    n = len(bob.flight.remaining_path()[1]) - 1
+    sizes = message_sizes(len(path) - 1, n, alice.flight.grid(path), fresh_setup=True)
     return sum(not from_alice for from_alice, _ in sizes) - 1
 
 
@@ -462,7 +457,7 @@ def test_forged_aborts_end_no_run_and_spend_nothing(tmp_path: Path) -> None:
         task = asyncio.create_task(attacker())
         for i in range(6):  # drone 1 compares again and again, a run every 300 s
             if i:
-                peer = w.drones[1].peers[2]
+                peer = w.drones[1].neighbourhood.peers[2]
                 peer.compared, peer.plan = None, []
             await w.clock.sleep(300)
         stop = True

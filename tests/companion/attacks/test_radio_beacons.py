@@ -46,19 +46,19 @@ def test_replayed_beacons_are_dropped(tmp_path: Path) -> None:
         await w.drones[2].stop()  # silent now: whatever drone 1 hears of "2" is the attacker
         await w.clock.sleep(2)  # a frame still on its way when drone 2 stopped has landed
         recorded = position_beacons(w, 2)
-        peer = w.drones[1].peers[2]
-        heard, before = peer.heard_at, sum(w.drones[1].rejected.values())
+        peer = w.drones[1].neighbourhood.peers[2]
+        heard, before = peer.heard_at, sum(w.drones[1].neighbourhood.rejected.values())
         for frame in recorded:
             await w.inject(frame.encode())
         await w.clock.sleep(0.5)
-        drops = sum(w.drones[1].rejected.values()) - before
+        drops = sum(w.drones[1].neighbourhood.rejected.values()) - before
         assert peer.heard_at == heard  # nothing replayed moved the peer
         await w.stop()
         return w, len(recorded), drops
 
     w, recorded, drops = run(main())
     assert recorded >= 3 and drops == recorded
-    assert any("replay" in reason for reason in w.drones[1].rejected)
+    assert any("replay" in reason for reason in w.drones[1].neighbourhood.rejected)
 
 
 @pytest.mark.parametrize("later_s", [65_536, 65_536 * 7 + 12])
@@ -74,14 +74,14 @@ def test_beacons_recorded_hours_ago_are_never_fresh_again(tmp_path: Path, later_
         await w.drones[2].stop()
         await w.clock.sleep(2)
         recorded = position_beacons(w, 2)
-        peer = w.drones[1].peers[2]
-        heard, rejected = peer.heard_at, dict(w.drones[1].rejected)
-        w.clock._wall_offset = w.clock.wall() - w.clock.now() + later_s  # the hours pass
+        peer = w.drones[1].neighbourhood.peers[2]
+        heard, rejected = peer.heard_at, dict(w.drones[1].neighbourhood.rejected)
+        w.clock.shift_wall(later_s)  # the hours pass
         for frame in recorded:
             await w.inject(frame.encode())
         await w.clock.sleep(0.5)
         assert peer.heard_at == heard  # nothing replayed moved the peer
-        new = {k: v - rejected.get(k, 0) for k, v in w.drones[1].rejected.items()}
+        new = {k: v - rejected.get(k, 0) for k, v in w.drones[1].neighbourhood.rejected.items()}
         await w.stop()
         return w, len(recorded), {k: v for k, v in new.items() if v}
 
@@ -133,7 +133,7 @@ def test_spoofed_node_ids_and_fingerprints_are_ignored(tmp_path: Path) -> None:
     results = len(w.events(1, "result"))
     assert counts == {"drone1": results, "all": results}
     assert w.events(1, "result") and w.autopilots[1].uploads  # the real drone 1 got through
-    assert set(w.drones[2].peers) == {1}
+    assert set(w.drones[2].neighbourhood.peers) == {1}
     assert not any("answered" == e.kind and e.detail.get("peer") != 1 for e in w.drones[2].events)
     aborts_are_codes(w)
 
@@ -160,7 +160,7 @@ def test_a_drone_of_an_untrusted_operator_is_ignored(tmp_path: Path) -> None:
     w, spent = run(main())
     assert spent == {1: 0, 2: 0}
     for node in (1, 2):
-        assert 3 not in w.drones[node].peers
+        assert 3 not in w.drones[node].neighbourhood.peers
         assert len(w.events(node, "untrusted")) == 1
         intruder = w.events(node, "intruder")
         assert intruder and all(e["peer"] == 3 and "distance_m" in e for e in intruder)

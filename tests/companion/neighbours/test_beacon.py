@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from companion.app.state import StateStore
 from companion.auth.beacon_keys import BeaconKeys
 from companion.auth.certificate import Certificate
 from companion.auth.keys import SigningKey
@@ -29,6 +28,7 @@ from companion.neighbours.beacon import (
     size_class,
 )
 from companion.neighbours.registry import Heard, Neighbours
+from companion.state import StateStore
 from protocol.messages import Suite
 
 NOW = int(time.time())

@@ -160,7 +160,8 @@ def test_remembered_streams_are_bounded() -> None:
     receiver.on_frame(Frame(FrameType.DATA, 1, 2, 1, 0, 0, 1, b"m"), 0.0)
     for k in range(100):  # forged one-frame messages, each a stream of its own
         receiver.on_frame(Frame(FrameType.DATA, 100 + k, 2, 5, 0, 0, 1, b"x"), 1.0 + k)
-    assert len(receiver._streams) == 8 and (1, 1) in receiver._streams
+    streams = receiver.streams()
+    assert len(streams) == 8 and (1, 1) in streams
 
 
 def test_finished_messages_answer_late_polls_with_complete() -> None:
@@ -186,10 +187,10 @@ def test_a_receiver_that_lost_the_message_gets_it_again() -> None:
     assert ack is not None
     out.on_ack(ack)
     assert out.acked == [True, True, True, True, False]
-    fresh = Receiver(2)  # the peer restarted: it holds nothing ...
-    # A restarted receiver counts its epochs from a random start, which is the old epoch once
-    # in 255 restarts (companion.radio.reassembly); here it is one the sender has not seen.
-    fresh._epoch = out.epoch if out.epoch is not None else 1
+    # The peer restarted: it holds nothing ... A restarted receiver counts its epochs from a
+    # random start, which is the old epoch once in 255 restarts (companion.radio.reassembly);
+    # here it is one the sender has not seen.
+    fresh = Receiver(2, epoch=out.epoch if out.epoch is not None else 1)
     _, empty = fresh.on_frame(Frame(FrameType.POLL, 1, 2, 7, 0, 0, out.count), 2.0)
     assert empty is not None
     out.on_ack(empty)  # ... which alone might be a stale answer: nothing changes
@@ -209,19 +210,22 @@ def test_a_delivered_message_is_remembered_while_its_session_is_alive() -> None:
     COMPLETE, not open a new copy that would deliver the message a second time."""
     receiver = Receiver(2, idle_timeout=10.0)
     out = Outgoing(1, 2, 7, 0, bytes(500), 100)
-    for frame in out.burst():
+    burst = out.burst()
+    for frame in burst:
         message, ack = receiver.on_frame(frame, 0.0)
     assert message is not None  # the COMPLETE ack is lost
+    last = burst[-1]  # fragment 4, asking for an ACK
+    assert last.index == 4 and last.flags & Flag.ACK_REQ
     for now in (8.0, 16.0, 24.0):
         receiver.touch(1, 7, now)  # other frames of session 7 (e.g. ACKs of the reply)
         receiver.expire(now)
     message, ack = receiver.on_frame(out.probe(), 30.0)  # the sender polls at last
     assert message is None and ack is not None and ack.flags & Flag.COMPLETE
-    message, ack = receiver.on_frame(out._data(4, Flag.ACK_REQ), 31.0)
+    message, ack = receiver.on_frame(last, 31.0)
     assert message is None and ack is not None and ack.flags & Flag.COMPLETE
     assert receiver.pending() == 0
     receiver.expire(41.0)  # a session silent for the idle timeout is forgotten
-    message, ack = receiver.on_frame(out._data(4, Flag.ACK_REQ), 42.0)
+    message, ack = receiver.on_frame(last, 42.0)
     assert message is None and ack is not None and not ack.flags & Flag.COMPLETE
 
 

@@ -177,8 +177,9 @@ def test_oversized_messages_are_refused_before_sending() -> None:
 def test_garbage_on_the_air_is_counted_and_ignored() -> None:
     async def main() -> None:
         async with pair(PROFILES["ideal"]) as p:
-            for n in range(300):
-                p.b._on_bytes(os.urandom(n % 260))
+            for n in range(300):  # put on the air by a's radio, beside its endpoint
+                await p.a.transport.transmit(os.urandom(1 + n % 259), 0.01)
+            await p.a.clock.sleep(1.0)  # the last one lands
             assert sum(p.b.stats.dropped.values()) == 300
             await _echo(p, [500])  # and the endpoint still works
 
@@ -203,7 +204,7 @@ def test_sending_on_a_closed_endpoint_fails_cleanly() -> None:
             p.a.abort(
                 2, session, AbortCode.SHUTDOWN
             )  # an abort after close only forgets the session
-            assert not p.a._sessions
+            assert not p.a.open_sessions
 
     run_simulated(main())
 
@@ -213,7 +214,7 @@ def test_sessions_opened_by_peers_are_bounded() -> None:
         async with pair(PROFILES["ideal"], config=LinkConfig(max_sessions=3)) as p:
             for _ in range(5):
                 await p.a.send(2, p.a.open(2), b"hi")
-            assert len(p.b._sessions) == 3
+            assert p.b.open_sessions == 3
             assert p.b.stats.dropped["too_many_sessions"] == 2
 
     run_simulated(main())
@@ -266,10 +267,19 @@ def test_an_aborted_session_answers_late_requests_with_abort() -> None:
             session = p.a.open(2)
             await p.a.send(2, session, b"hello")
             peer, sess = await p.b.accept()
+            real, lost = p.b.transport.transmit, list[bytes]()
+
+            async def lose_aborts(frame: bytes, airtime: float) -> None:
+                if decode_frame(frame).type is FrameType.ABORT and len(lost) < 3:
+                    lost.append(frame)  # the three copies never make it to the air
+                    return
+                await real(frame, airtime)
+
+            p.b.transport.transmit = lose_aborts  # type: ignore[method-assign]
             p.b.abort(peer, sess, AbortCode.PROTOCOL)
-            p.b.radio._control.clear()  # the three copies never make it to the air
             with pytest.raises(PeerAborted, match="protocol"):
                 await p.a.send(2, session, b"more")
+            assert len(lost) == 3
 
     run_simulated(main())
 
@@ -380,6 +390,6 @@ def test_a_dying_link_task_is_logged_and_fails_every_waiter(
     with caplog.at_level(logging.ERROR, logger="companion.radio"):
         run_simulated(main())
     (record,) = [r for r in caplog.records if getattr(r, "event", None) == "task_failed"]
-    assert record.getMessage().startswith("task link-tx-1 failed: OSError")
+    assert record.getMessage().startswith("task link-1-tx failed: OSError")
     assert record.exc_info is not None and record.exc_info[0] is OSError  # the traceback
-    assert record.fields["task"] == "link-tx-1"  # type: ignore[attr-defined]
+    assert record.fields["task"] == "link-1-tx"  # type: ignore[attr-defined]

@@ -162,7 +162,7 @@ async def stress(
     config = LinkConfig(idle_timeout_s=idle_timeout_s)
     a = LinkEndpoint(A_NODE, medium.attach(A_NODE), link, config, clock)
     b = LinkEndpoint(B_NODE, medium.attach(B_NODE), link, config, clock)
-    rto = a._timer(B_NODE).floor
+    rto = a.retransmission_floor(B_NODE)
     async with a, b:
         runner = Conversations(a, b, receive_timeout)
         dispatcher = asyncio.create_task(runner.dispatch())
@@ -175,7 +175,7 @@ async def stress(
         finally:
             dispatcher.cancel()
         assert a.receiver.pending() == 0 and b.receiver.pending() == 0
-        assert not a._sessions and not b._sessions
+        assert not a.open_sessions and not b.open_sessions
     return a, b
 
 

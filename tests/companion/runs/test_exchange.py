@@ -96,7 +96,7 @@ def test_peer_vanishing_mid_run_ends_in_a_known_state(compact: Party) -> None:
                 await run_alice(p.a, 2, alice)
             await task
             assert p.a.receiver.pending() == 0
-            assert not p.a._sessions
+            assert not p.a.open_sessions
 
     run_simulated(main())
     assert alice.state is State.FAILED
@@ -119,7 +119,7 @@ def test_a_malformed_message_aborts_both_sides(compact: Party) -> None:
             with pytest.raises(PeerAborted, match="code 1"):
                 await p.a.receive(2, session)
             await task
-            assert not p.b._sessions
+            assert not p.b.open_sessions
 
     run_simulated(main())
     assert bob.state is State.FAILED

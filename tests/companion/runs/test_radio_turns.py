@@ -22,12 +22,12 @@ def test_a_peer_busy_with_its_own_run_is_asked_again_soon(tmp_path: Path) -> Non
     async def main() -> tuple[World, float]:
         w = await world(tmp_path)
         bob = w.drones[2]
-        bob._own_on_air = _WaitingRun()  # type: ignore[assignment]
+        bob.air.own = _WaitingRun()  # type: ignore[assignment]
         while not w.events(1, "peer_busy"):
             await w.clock.sleep(1)
         busy_at = w.clock.now() - w.drones[1].epoch
         await w.clock.sleep(2)
-        bob._own_on_air = None  # its own run is over
+        bob.air.own = None  # its own run is over
         while not w.events(1, "result"):
             await w.clock.sleep(1)
         await w.clock.sleep(5)
@@ -55,12 +55,12 @@ def test_a_request_waits_behind_a_run_under_way(tmp_path: Path) -> None:
     async def main() -> World:
         w = await world(tmp_path)
         bob = w.drones[2]
-        bob._own_on_air = Answered()  # type: ignore[assignment]
-        turn: Any = bob._radio.turn(3)  # our own run holds the radio
+        bob.air.own = Answered()  # type: ignore[assignment]
+        turn: Any = bob.air.turns.turn(3)  # our own run holds the radio
         await turn.__aenter__()
         await w.clock.sleep(60)
         assert not w.events(1, "result") and not w.events(2, "refused")
-        bob._own_on_air = None
+        bob.air.own = None
         await turn.__aexit__(None, None, None)
         while not w.events(1, "result"):
             await w.clock.sleep(1)

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from companion.app.state import StateStore
 from companion.runs.budget import ALICE, BOB, BudgetExceeded, RunLedger, RunLimits, Scope
+from companion.state import StateStore
 
 
 def test_budget_per_drone_operator_and_total_survives_a_restart(tmp_path: Path) -> None:

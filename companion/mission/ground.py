@@ -1,0 +1,81 @@
+"""Distances and cuts along ground paths (degE7 points on the local tangent plane,
+:func:`protocol.geo.geodesy.ground_offset`, WGS84): how far apart two points are, how far a
+point is from a segment, and which part of a path lies within a distance ahead."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+
+from protocol.geo.geodesy import ground_offset
+from protocol.run import DEFAULT_LIMITS
+
+
+def distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
+    """Ground distance between two degE7 points."""
+    return math.hypot(*ground_offset(a[0] / 1e7, a[1] / 1e7, b[0] / 1e7, b[1] / 1e7))
+
+
+def segment_distance_m(p: tuple[int, int], a: tuple[int, int], b: tuple[int, int]) -> float:
+    """Ground distance from point p to segment ab (degE7), on the tangent plane at p."""
+    ay, ax = ground_offset(p[0] / 1e7, p[1] / 1e7, a[0] / 1e7, a[1] / 1e7)
+    by, bx = ground_offset(p[0] / 1e7, p[1] / 1e7, b[0] / 1e7, b[1] / 1e7)
+    dx, dy = bx - ax, by - ay
+    length2 = dx * dx + dy * dy
+    t = 0.0 if length2 == 0 else max(0.0, min(1.0, -(ax * dx + ay * dy) / length2))
+    return math.hypot(ax + t * dx, ay + t * dy)
+
+
+def cut_at(
+    path: Sequence[tuple[int, int]],
+    horizon_m: float,
+    position: tuple[int, int] | None = None,
+) -> list[tuple[int, int]]:
+    """The path up to the first vertex at least ``horizon_m`` ahead (whole segments, so
+    nothing is rounded); all of it for a horizon of 0.  Distances count from ``position``
+    (the drone, somewhere on the first segment) when given, else from the first vertex."""
+    if horizon_m <= 0 or len(path) < 2:
+        return list(path)
+    out = [path[0]]
+    for k, (a, b) in enumerate(itertools.pairwise(path)):
+        out.append(b)
+        horizon_m -= distance_m(position if position is not None and k == 0 else a, b)
+        if horizon_m <= 0:
+            break
+    return out
+
+
+def near_cut(
+    path: Sequence[tuple[int, int]],
+    horizon_m: float,
+    position: tuple[int, int] | None = None,
+    *,
+    least: int = 2,
+) -> list[tuple[int, int]]:
+    """What a near run compares: :func:`cut_at`, at least ``least`` segments, and then as
+    many more as the padding makes free (runs are padded to a power of two, so 3 segments
+    cost what 4 do).  A near run that takes them may leave no full run to do, which under a
+    duty cycle is the difference between a result and a precaution."""
+    if horizon_m <= 0 or len(path) < 2:
+        return list(path)
+    segments = max(len(cut_at(path, horizon_m, position)) - 1, least)
+    return list(path[: DEFAULT_LIMITS.public_size(segments) + 1])
+
+
+def reached_within(
+    path: Sequence[tuple[int, int]],
+    first: int,
+    position: tuple[int, int] | None,
+    distance: float,
+) -> set[int]:
+    """Indices (``first`` + k) of the segments the drone starts within ``distance`` metres
+    along its path from ``position`` (the current segment counts at once)."""
+    out = {first}
+    travelled = 0.0
+    for k, (a, b) in enumerate(itertools.pairwise(path)):
+        travelled += distance_m(position if position is not None and k == 0 else a, b)
+        if travelled > distance or k + 1 >= len(path) - 1:
+            break
+        out.add(first + k + 1)
+    return out

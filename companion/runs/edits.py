@@ -1,0 +1,217 @@
+"""What the companion changes on its drone: altitude edits and precautions.
+
+Conflicts (from Alice's runs) and precautions (from the fail-safe,
+:mod:`companion.runs.guard`) become raises clear of the peers' altitude slots
+(:func:`companion.mission.levels.plan_raises`) and an uploaded, read-back mission edit that
+flies each raised segment at its raise from end to end
+(:func:`companion.mission.planner.plan_edit`); a precaution may instead hold before a segment
+until the result is in.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from companion.context import Context
+from companion.events import (
+    EventKind,
+    FixedSegments,
+    Hold,
+    PeerFailure,
+    PeerNote,
+    Problem,
+    Uploaded,
+)
+from companion.mission.autopilot import AutopilotBase, AutopilotError
+from companion.mission.flightpath import DO_JUMP
+from companion.mission.items import MissionError, MissionItem
+from companion.mission.levels import NoClearAltitude, plan_raises
+from companion.mission.own_flight import OwnFlight, same_track
+from companion.mission.planner import Edit, PlannerError, fixed_segments, plan_edit
+from companion.neighbours.neighbourhood import Neighbourhood
+from companion.neighbours.peers import Peer
+from companion.runs.failsafe import Action
+
+
+class Edits:
+    """Raises, uploads and holds.  ``announce()``: our beacons should tell the new slots."""
+
+    def __init__(
+        self,
+        ctx: Context,
+        flight: OwnFlight,
+        neighbourhood: Neighbourhood,
+        autopilot: AutopilotBase,
+        announce: Callable[[], None],
+    ) -> None:
+        self.ctx = ctx
+        self.settings = ctx.settings
+        self.flight = flight
+        self.vehicle = flight.vehicle
+        self.peers = neighbourhood.peers
+        self.autopilot = autopilot
+        self._announce = announce
+        self.flagged: set[int] = set()  # segments the comparisons found in conflict
+        self.precaution: dict[int, set[int]] = {}  # peer -> segments climbed as a precaution
+        self.holding: set[int] = set()  # peers we hold for
+
+    def covers(self, node: int) -> bool:
+        """A precaution for this peer stands (a climb, a hold, or one only reported)."""
+        return node in self.precaution or node in self.holding
+
+    async def take(self, node: int, action: Action, segments: list[int]) -> None:
+        """The fail-safe's precaution for peer ``node``: climb over ``segments`` (levels
+        chosen with the conflicts), hold before the first of them, or only note it."""
+        if action is Action.OFF:
+            self.precaution[node] = set()  # reported once; nothing flies differently
+        elif action is Action.CLIMB:
+            self.precaution[node] = set(segments)
+            await self.replan(f"precaution for {node}")
+        else:
+            self.holding.add(node)
+            self.ctx.spawn(self._hold_before(node, segments[0]), "hold")
+
+    async def _hold_before(self, peer: int, segment: int) -> None:
+        """Pause the mission once the vehicle reaches the start of ``segment``."""
+        vs = self.flight.path.vertices
+        end = vs[min(segment + 1, len(vs) - 1)]
+        gate = min(end.items, default=0)  # the segment is flown once its end item is current
+        while peer in self.holding and self.vehicle.current_item < gate:
+            await self.ctx.clock.sleep(0.5)
+        if peer not in self.holding:
+            return
+        try:
+            await self.autopilot.pause()
+            self.ctx.record(EventKind.HOLD, Hold(peer=peer, before_segment=segment))
+        except AutopilotError as exc:
+            self.ctx.record(EventKind.HOLD_FAILED, PeerFailure(peer=peer, error=str(exc)))
+
+    async def release(self, node: int) -> None:
+        """The result is in: precautions for this peer end."""
+        self.precaution.pop(node, None)
+        if node not in self.holding:
+            return
+        self.holding.discard(node)
+        if self.holding:
+            return
+        try:
+            await self.autopilot.resume()
+            self.ctx.record(EventKind.RESUMED, PeerNote(peer=node))
+        except AutopilotError as exc:
+            self.ctx.record(EventKind.RESUME_FAILED, PeerFailure(peer=node, error=str(exc)))
+
+    def slots_heard(self, peer: Peer, new_peer: bool) -> None:
+        """A peer announced new altitude slots: our raises keep clear of every peer's slots
+        (a run compared the altitudes we fly without them); of two drones that raised into
+        each other's slots the higher node moves, so two never climb past each other in
+        turn.  A peer heard for the first time is news to both."""
+        node = self.settings.node
+        raised = bool(self.flight.ahead(self.flight.raises)) and (new_peer or peer.node < node)
+        # A raised higher node that moved keeps clear of us: no chasing it (its move may
+        # be one away from our raise).
+        yields = peer.raised and peer.node > node and not new_peer
+        ours = (bool(peer.conflicts) or peer.node in self.precaution) and not yields
+        if ours or raised:
+            self.ctx.spawn(self.replan(f"peer {peer.node} announced altitude slots"), "replan")
+
+    def _keeps_clear_of(self, peer: Peer) -> bool:
+        """Whether our raises keep clear of the altitude slots of ``peer`` even where we do
+        not conflict with it (a run compared the altitudes we fly without raises): of a peer
+        that flies its own altitudes, and of a lower node's.  Of two drones that raised into
+        each other's slots the higher node moves (it hears the lower one's new slots and
+        re-plans), so two never climb past each other in turn."""
+        return not peer.raised or peer.node < self.settings.node
+
+    async def replan(self, why: str) -> None:
+        """Upload the raises the conflicts and precautions call for, if they changed."""
+        async with self.flight.editing:
+            clear_of = sorted(n for n, p in self.peers.items() if self._keeps_clear_of(p))
+            raises = self._raises(clear_of)
+            if raises is None or self.flight.ahead(raises) == self.flight.ahead(self.flight.raises):
+                return
+            try:
+                edit = plan_edit(
+                    self.flight.original,
+                    raises,
+                    self.settings.offset,
+                    path=self.flight.path,
+                    vehicle=self.flight.edit_vehicle(),
+                )
+            except PlannerError as exc:
+                self.ctx.record(EventKind.PLAN_FAILED, Problem(error=str(exc)))
+                return
+            fixed = fixed_segments(self.flight.path, raises)
+            if fixed:  # e.g. the last leg into a landing: its end may not move
+                self.ctx.record(EventKind.FIXED_SEGMENTS, FixedSegments(segments=fixed, why=why))
+            try:
+                new, mark, sent_at = await self._upload(edit)
+            except (AutopilotError, MissionError) as exc:
+                self.ctx.record(EventKind.UPLOAD_FAILED, Problem(error=str(exc)))
+                return
+            self.flight.edited(new, raises, Edit(new, edit.origin, edit.inserted), mark, sent_at)
+            self._announce()  # peers keep clear of our slots: tell them now, not in minutes
+            self.flagged = {k for p in self.peers.values() for k in p.conflicts}
+            self.ctx.record(
+                EventKind.UPLOADED,
+                Uploaded(
+                    flagged=sorted(raises),
+                    raises={str(k): v for k, v in sorted(raises.items())},
+                    verified=True,
+                    offset_m=self.settings.offset.delta,
+                    inserted=edit.inserted,
+                    clear_of=clear_of,  # peers whose altitudes the raises keep clear of as well
+                    why=why,
+                ),
+            )
+
+    def _raises(self, clear_of: list[int]) -> dict[int, float] | None:
+        """The raises the conflicts and precautions call for (None: no clear altitude,
+        recorded).  A raise only grows while its conflict stands: a peer whose announced
+        slots shrink (it flew on, it landed) is no reason for another edit in flight."""
+        offset = self.settings.offset
+        try:
+            raises = plan_raises(
+                {node: p.conflicts for node, p in self.peers.items()},
+                self.precaution,
+                {node: p.beacon.slots for node, p in self.peers.items()},
+                self.flight.planned_bands(),
+                offset.offset_m,
+                self.settings.separation.vertical_m,
+                1.0 if offset.direction == "up" else -1.0,
+                keep_clear=clear_of,
+            )
+        except NoClearAltitude as exc:
+            self.ctx.record(EventKind.PLAN_FAILED, Problem(error=str(exc)))
+            return None
+        held = self.flight.raises
+        return {k: max(v, held.get(k, v), key=abs) for k, v in raises.items()}
+
+    async def _upload(self, edit: Edit) -> tuple[list[MissionItem], int, float]:
+        """Upload ``edit`` (read back by the autopilot): the items the vehicle now holds, the
+        one marked current and when the upload began.  The edit is built on what the
+        vehicle holds now and keeps the item it is flying: PX4 restarts a mission at the item
+        an upload marks current."""
+        held = await self.autopilot.download()
+        before = self.flight.edit
+        if not same_track(held, before.items if before is not None else self.flight.original):
+            raise AutopilotError("the vehicle's mission changed since the start")
+        current = max(
+            self.vehicle.current_item, next((i for i, it in enumerate(held) if it.current), 0)
+        )
+        current = min(current, len(held) - 1)
+        original = before.origin[current] if before is not None else current
+        mark = edit.inserted if edit.inserted is not None else edit.index_of(original)
+        new = []
+        for i, planned in enumerate(edit.items):
+            if i == edit.inserted:
+                new.append(planned.replace(current=int(i == mark)))
+                continue
+            source = before.index_of(edit.origin[i]) if before is not None else edit.origin[i]
+            new.append(held[source].replace(seq=i, z=planned.z, current=int(i == mark)))
+        new = [
+            it.replace(param1=edit.items[i].param1) if it.command == DO_JUMP else it
+            for i, it in enumerate(new)
+        ]  # jump targets as the edit numbers them
+        sent_at = self.ctx.clock.now()
+        await self.autopilot.replace_mission(new, held)
+        return new, mark, sent_at
