@@ -10,7 +10,7 @@ from typing import Any
 
 from companion.sim.metrics import closest, enu
 from companion.sim.replay import Replay, Tracks
-from companion.sim.report import ReplayReport
+from companion.sim.report import FEW, NEAR_FACTOR, ReplayReport, shown_pairs
 from companion.sim.scenario import ScenarioError
 from companion.sim.vehicles import Track
 
@@ -28,7 +28,8 @@ PLOT_FORMATS = ("png", "pdf", "svg")
 def plot_report(replay: Replay, out: str | Path) -> None:
     """PNG, PDF or SVG (by ``out``'s ending): ground tracks (planned, flown, direction,
     closest approaches), the distance of every pair over time with the runs' moments marked,
-    and altitudes over the flight window."""
+    and altitudes over the flight window.  With more than a few drones only the pairs that
+    came near are drawn and the legends go below the panels."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -46,16 +47,19 @@ def plot_report(replay: Replay, out: str | Path) -> None:
         north, east, _ = enu((lat, lon, 0.0), ref_deg)
         return east, north
 
-    fig, (ground, gap, height) = plt.subplots(1, 3, figsize=(19, 6))
+    many = len(report.drones) > FEW  # legends below the panels, not over them
+    fig, (ground, gap, height) = plt.subplots(1, 3, figsize=(24 if many else 19, 6))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     colour = {d.id: colours[n % len(colours)] for n, d in enumerate(report.drones)}
     _ground(ground, report, tracks, colour, en)
     _gaps(gap, report, tracks, colour)
     _heights(height, report, tracks, colour)
+    for panel in (ground, gap, height):
+        _legend(panel, outside=many)
     fig.tight_layout()
     tmp = out.with_name(f".{out.name}.tmp")
     try:
-        fig.savefig(tmp, dpi=100, format=kind)
+        fig.savefig(tmp, dpi=100, format=kind, bbox_inches="tight")
         tmp.replace(out)
     finally:
         plt.close(fig)
@@ -88,7 +92,7 @@ def _ground(
                     tail,
                     arrowprops={"arrowstyle": "-|>", "color": c, "mutation_scale": 18, "lw": 0},
                 )
-    for pair in report.pairs:
+    for pair in shown_pairs(report):
         a, b = pair.drones
         _, t, pa, pb = closest(tracks.flown[a], tracks.flown[b])
         if math.isfinite(pair.closest_approach_m):
@@ -102,13 +106,22 @@ def _ground(
     ground.plot([], [], "kx", label="closest approach")
     ground.set(xlabel="east (m)", ylabel="north (m)", title=f"{report.scenario}: ground tracks")
     ground.set_aspect("equal", adjustable="datalim")
-    ground.legend(loc="best", fontsize=7)
 
 
 def _gaps(gap: Any, report: ReplayReport, tracks: Tracks, colour: dict[int, str]) -> None:
     """The 3-D distance of every pair over time, with and without the companions, and the
-    moments of the runs and edits that concern the pair."""
-    for pair in report.pairs:
+    moments of the runs and edits that concern the pair (of a busy sky, the pairs that came
+    near: :func:`companion.sim.report.shown_pairs`)."""
+    pairs = shown_pairs(report)
+    if not pairs:
+        near = NEAR_FACTOR * report.separation_m
+        gap.text(
+            0.5, 0.5, f"no pair came within {near:.0f} m", transform=gap.transAxes, ha="center"
+        )
+        window = _flight_window(tracks.flown)
+        if window is not None:
+            gap.set_xlim(*window)
+    for pair in pairs:
         a, b = pair.drones
         for which, style in ((tracks.flown, "-"), (tracks.baseline, ":")):
             series = _separation(which[a], which[b])
@@ -133,7 +146,6 @@ def _gaps(gap: Any, report: ReplayReport, tracks: Tracks, colour: dict[int, str]
     gap.axhline(report.offset_m, color="red", lw=0.8, ls="--", label="offset")
     gap.set(xlabel="simulated time (s)", ylabel="3-D distance (m)", title="distance of each pair")
     gap.set_yscale("symlog", linthresh=20)
-    gap.legend(loc="best", fontsize=7)
 
 
 def _heights(height: Any, report: ReplayReport, tracks: Tracks, colour: dict[int, str]) -> None:
@@ -161,7 +173,22 @@ def _heights(height: Any, report: ReplayReport, tracks: Tracks, colour: dict[int
         ylabel="altitude AMSL (m)",
         title="altitude while flying",
     )
-    height.legend(loc="best", fontsize=7)
+
+
+def _legend(panel: Any, *, outside: bool) -> None:
+    """The panel's legend: over the chart where it fits (a few drones), else
+    below the panel, in as many columns as it needs."""
+    if not outside:
+        panel.legend(loc="best", fontsize=7)
+        return
+    entries = len(panel.get_legend_handles_labels()[1])
+    panel.legend(
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.12),
+        fontsize=7,
+        ncol=max(1, math.ceil(entries / 6)),
+        frameon=False,
+    )
 
 
 def _flight_window(flown: dict[int, Track], margin_s: float = 30.0) -> tuple[float, float] | None:

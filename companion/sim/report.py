@@ -11,6 +11,7 @@ states without failing it (its last line is then ``OK (with notes): ...``, never
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -239,6 +240,53 @@ def _pair_line(p: PairReport) -> str:
     )
 
 
+NEAR_FACTOR = 5.0  # a pair "came near" within this many horizontal separations
+FEW = 3  # up to this many drones (or pairs) everything is listed
+
+
+def came_near(report: ReplayReport, pair: PairReport) -> bool:
+    """A pair worth showing among many: the companion acted for it, or it had (or should
+    have had) a conflict, or it came within ``NEAR_FACTOR`` separations with or without
+    the companion."""
+    near = NEAR_FACTOR * report.separation_m
+    closest = min(pair.closest_approach_m, pair.closest_approach_baseline_m)
+    return pair.conflict or pair.acted or pair.false_alarm or pair.made_worse or closest <= near
+
+
+def shown_pairs(report: ReplayReport) -> list[PairReport]:
+    """Every pair of a small replay; of a busy sky only those that came near."""
+    if len(report.pairs) <= FEW:
+        return list(report.pairs)
+    return [p for p in report.pairs if came_near(report, p)]
+
+
+def _levels_up(d: DroneReport, offset_m: float) -> int:
+    """How many offsets above its plan the drone flew at most: its largest raise in any
+    verified edit (a precaution's climb, undone later, counts)."""
+    raised = [abs(float(v)) for e in d.edits for v in e.get("raises", {}).values()]
+    top = max([*raised, *(abs(v) for v in d.raises.values())], default=0.0)
+    return math.ceil(top / offset_m - 1e-9) if offset_m > 0 else 0
+
+
+def drone_table(report: ReplayReport) -> list[str]:
+    """One line per drone: what it flew, what it sent and what went wrong, in columns."""
+    head = (
+        f"  {'drone':>5}  {'levels up':>9}  {'edit':<10}  {'precautions':>11}  "
+        f"{'results':>7}  {'failed':>6}  {'unfinished':>10}  {'bytes':>8}  {'airtime s':>9}"
+    )
+    lines = [head]
+    for d in report.drones:
+        failed = sum(1 for f in d.failures if f["kind"] not in FAILURES)
+        broke = len(d.failures) - failed
+        edit = d.edit.value + (f" ({broke} failure(s))" if broke else "")
+        lines.append(
+            f"  {d.id:>5}  {_levels_up(d, report.offset_m):>9}  {edit:<10}  "
+            f"{len(d.precautionary):>11}  {len(d.runs):>7}  {failed:>6}  "
+            f"{d.runs_unfinished:>10}  {d.bytes_sent:>8}  {d.airtime_s:>9.1f}"
+        )
+    return lines
+
+
 def format_report(report: ReplayReport) -> str:
     """The replay as text: what each drone did, each pair's separation, and every problem."""
     lines = [
@@ -248,8 +296,18 @@ def format_report(report: ReplayReport) -> str:
         + ("" if report.finished else " -- TIME LIMIT REACHED before every mission was flown")
         + ":"
     ]
-    lines += [_drone_line(d, report.offset_m) for d in report.drones]
-    lines += [_pair_line(p) for p in report.pairs]
+    if len(report.drones) <= FEW:
+        lines += [_drone_line(d, report.offset_m) for d in report.drones]
+    else:
+        lines += drone_table(report)
+    shown = shown_pairs(report)
+    lines += [_pair_line(p) for p in shown]
+    if len(shown) < len(report.pairs):
+        lines.append(
+            f"  {len(report.pairs) - len(shown)} other pair(s) never came within "
+            f"{NEAR_FACTOR * report.separation_m:.0f} m of each other, with or without the "
+            "companion, and nothing was done for them"
+        )
     lines.append(
         f"  conflicts resolved {report.conflicts_resolved}/{report.conflicts}, "
         f"precautionary actions {report.precautionary_actions}, "

@@ -192,3 +192,55 @@ def test_every_failure_is_stated_and_fails_the_replay(change: Any, says: str) ->
     assert not report.ok and any(says in p for p in report.problems)
     text = format_report(report)
     assert "FAILED" in text and says in text and "OK:" not in text
+
+
+def _pair(a: int, b: int, closest: float, **changes: Any) -> dict[str, Any]:
+    quiet = {
+        "drones": [a, b],
+        "conflict": False,
+        "acted": False,
+        "resolved": False,
+        "paths_cross": False,
+        "paths_near": False,
+        "inside_baseline_s": 0.0,
+        "closest_approach_m": closest,
+        "closest_approach_baseline_m": closest,
+    }
+    pair: dict[str, Any] = GOOD["pairs"][0] | quiet | changes
+    return pair
+
+
+def _busy_sky(r: dict[str, Any]) -> None:
+    """Five drones: 1-2 resolved as in GOOD (1 climbed two levels), 3-4 passed 60 m apart,
+    every other pair kilometres apart."""
+    r["drones"] = [
+        _drone(1, edit="verified", raises={"0": 15.0}),
+        *(_drone(k, flagged_segments=[]) for k in range(2, 6)),
+    ]
+    r["drones"][2]["precautionary"] = [{"peer": 4, "segments": [1]}]
+    r["drones"][2]["edits"] = [{"raises": {"1": 10.0}}]  # the precaution's climb, undone
+    r["pairs"] = [GOOD["pairs"][0]] + [
+        _pair(a, b, 60.0 if (a, b) == (3, 4) else 1500.0)
+        for a in range(1, 6)
+        for b in range(a + 1, 6)
+        if (a, b) != (1, 2)
+    ]
+    r["precautionary_actions"] = 1
+
+
+def test_a_busy_sky_shows_the_pairs_that_came_near_and_a_table_of_drones() -> None:
+    """More than three drones: a row per drone (levels above its plan, precautions, runs,
+    bytes) instead of a sentence each, and only the pairs that came near (within five
+    separations, or acted on) -- the other eight are counted, not listed."""
+    text = format_report(_report(_busy_sky))
+    lines = text.splitlines()
+    header = next(i for i, line in enumerate(lines) if "levels up" in line)
+    rows = [line.split() for line in lines[header + 1 : header + 6]]
+    assert [row[0] for row in rows] == ["1", "2", "3", "4", "5"]
+    assert rows[0][1] == "2" and rows[0][2] == "verified"  # 15 m with a 10 m offset
+    assert rows[2][1:5] == ["1", "not", "needed", "1"]  # one level (undone), one precaution
+    assert "drones 1-2:" in text and "drones 3-4:" in text
+    assert "drones 1-3:" not in text and "drones 4-5:" not in text
+    assert "8 other pair(s) never came within 75 m" in text
+    small = format_report(_report(lambda r: None))
+    assert "levels up" not in small and "other pair" not in small  # a small replay: all

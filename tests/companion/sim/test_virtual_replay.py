@@ -48,7 +48,12 @@ def _virtual(name: str, **changes: object) -> Report:
 )
 def test_scenario(name: str, climbers: set[int], conflicts: int) -> None:
     report = _virtual(name)
-    check(report, climbers)
+    # three_drones: drone 2 took a precaution for 3 (clear of each other) at t = 78 s in one
+    # clean-clone CI run and in 1 of 30 runs of the code before this change with four
+    # replays on two cores (0 of 30 with it; 0 of 16 on an idle machine, either code): the
+    # virtual clock charges each step its CPU, and a loaded machine makes the run with 3
+    # late enough for the fail-safe -- at most that one
+    check(report, climbers, precautions=1 if name == "three_drones" else 0)
     assert report["conflicts"] == conflicts
     if name == "lossy_sf9":
         assert report["link"]["profile"] == "eu868-sf9" and report["link"]["loss"] == 0.3
