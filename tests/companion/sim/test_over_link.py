@@ -72,12 +72,13 @@ def test_compare_table_and_bad_profile(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_bench_link_rows(paper_shaped: PaperShaped) -> None:
-    """The paper's 30 pairs from a data directory (here the project's of their shape)."""
+    """The paper's 30 pairs from a data directory (here the project's of their shape), on one
+    profile at two losses (the ideal profile runs in the test below: the suite's time)."""
     data = paper_shaped.directory
-    result = bench_link(data, ["ideal", "us915-sf9"], (0.0, 0.3), size=2, progress=False)
+    result = bench_link(data, ["us915-sf9"], (0.0, 0.3), size=2, progress=False)
     assert result["pairs_from"] == str(data)
     rows = result["rows"]
-    assert len(rows) == 2 * 2 * 3  # profiles x losses x (paper pair, first contact, 2x2)
+    assert len(rows) == 2 * 3  # losses x (paper pair, first contact, 2x2)
     for row in rows:
         assert row["correct"] == row["runs"]
         assert row["frames_sent"] > 0 and row["airtime_s"] > 0
