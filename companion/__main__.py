@@ -1,5 +1,5 @@
 """Command line of the flight companion (``drone-deconflict`` or ``python -m companion``):
-run, keys, replay, compare, bench-link, radio-demo, link-hub, mock-autopilot, mission show.
+run, keys, replay, fleet, compare, bench-link, radio-demo, link-hub, mock-autopilot, mission show.
 Errors are one line and exit 2 (:mod:`protocol.tools.cli`)."""
 
 from __future__ import annotations
@@ -281,6 +281,46 @@ def _add_replay(sub: Subparsers) -> None:
     replay.set_defaults(func=commands.replay)
 
 
+def _add_fleet(sub: Subparsers) -> None:
+    fleet = sub.add_parser(
+        "fleet", help="a city's hour of drone traffic in virtual time (fleet simulation)"
+    )
+    fleet.add_argument(
+        "--drones", type=cli.integer(2, 250), default=100, help="default: %(default)s"
+    )
+    fleet.add_argument(
+        "--hours", type=cli.number(0, 8, above=True), default=1.0, help="default: %(default)s"
+    )
+    fleet.add_argument(
+        "--area-km",
+        type=cli.number(0, 100, above=True),
+        default=6.0,
+        help="side of the square the drones fly over, km (default: %(default)s)",
+    )
+    fleet.add_argument(
+        "--range-km",
+        type=cli.number(0, 100, above=True),
+        default=3.0,
+        help="radio range, km (default: %(default)s)",
+    )
+    fleet.add_argument(
+        "--profile", type=_profile, default="us915-sf7", help="link profile (default: %(default)s)"
+    )
+    fleet.add_argument(
+        "--loss", type=cli.number(0, 0.9), default=0.1, help="frame loss (default: %(default)s)"
+    )
+    fleet.add_argument(
+        "--seed",
+        type=cli.integer(0, 2**31),
+        default=1,
+        help="traffic and radio (default: %(default)s)",
+    )
+    fleet.add_argument("--json", action="store_true", help="print the summary as JSON")
+    fleet.add_argument("--out", help="also write the whole replay report (JSON) to this file")
+    fleet.add_argument("--progress", action="store_true", help="tell the story on stderr")
+    fleet.set_defaults(func=commands.fleet)
+
+
 def _add_run(sub: Subparsers) -> None:
     run = sub.add_parser("run", help="the companion process beside one autopilot")
     run.add_argument(
@@ -353,6 +393,7 @@ def _parser() -> argparse.ArgumentParser:
     _add_bench(sub)
     _add_demo(sub)
     _add_replay(sub)
+    _add_fleet(sub)
     _add_run(sub)
     keys_cli.add_parser(sub)
     cli.add_common(parser)

@@ -2,7 +2,7 @@
 
 Usage: .venv/bin/python scripts/record_benchmarks.py [crypto] [paper] [paper-dgk] [scaling]
 [scaling-2000] [paper-separation] [scaling-separation] [design] [link] [replays] [replays-px4]
-[demo] (default: all; replays-px4 only
+[fleet] [busy] [demo] (default: all; replays-px4 only
 with PX4_SITL set to a PX4 SITL build) [--repeat N] [--data DIR]
 
 ``paper``, ``paper-dgk``, ``paper-separation`` and ``link`` run the paper's benchmark files,
@@ -25,6 +25,7 @@ import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from companion.sim.bench_link import bench_link, format_link
 from protocol.geo.volumes import Separation
@@ -71,7 +72,11 @@ def replays(px4: str | None = None, names: tuple[str, ...] = ()) -> str:
         "| against deviating peers | airtime | first result | closest without -> with |",
         "|---|---|---:|---:|---:|---:|---:|---:|---|---|",
     ]
-    paths = [SCENARIOS / f"{n}.toml" for n in names] or sorted(SCENARIOS.glob("*.toml"))
+    paths = [SCENARIOS / f"{n}.toml" for n in names] or sorted(
+        p
+        for p in SCENARIOS.glob("*.toml")
+        if p.stem not in BUSY  # (those: ``busy``)
+    )
     for path in paths:
         print(f"  ... replay {path.stem}{how}", file=sys.stderr, flush=True)
         extra = ["--px4", px4] if px4 else []
@@ -123,6 +128,98 @@ def demo() -> str:
     return f"{head}\n\n```\n{run.stdout.strip()}\n```"
 
 
+def fleet() -> str:
+    """The fleet simulation (issue 29): a city's hour at 50 and 100 drones, one run each."""
+    import time
+
+    from companion.sim.city import CitySpec, run_city
+
+    rows = [
+        "| drones | hours | drone-h airborne | all flown | runs / drone-h | KB sent / drone-h "
+        "| precautions / drone-h | conflicts | resolved | false alarms | made worse | wall s |",
+        "|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    tables = []
+    for drones in (50, 100):
+        spec = CitySpec(drones=drones, hours=1.0)
+        print(f"  ... fleet {drones} drones", file=sys.stderr, flush=True)
+        start = time.perf_counter()
+        city = run_city(spec)
+        wall = time.perf_counter() - start
+        r, hours = city.replay, city.drone_hours or float("inf")
+        runs = sum(len(d.runs) for d in r.drones)
+        sent = sum(d.bytes_sent for d in r.drones)
+        precautions = sum(len(d.precautionary) for d in r.drones)
+        rows.append(
+            f"| {drones} | 1 | {city.drone_hours:.1f} | {'yes' if city.finished else 'no'} "
+            f"| {runs / hours:.1f} | {sent / 1000 / hours:.0f} | {precautions / hours:.2f} "
+            f"| {r.conflicts} | {r.conflicts_resolved} | {r.false_alarms} | {r.made_worse} "
+            f"| {wall:.0f} |"
+        )
+        head = (
+            f"{drones} drones -- drones in range (mean number of other airborne drones within "
+            "radio range while airborne) against outcomes:"
+        )
+        tables.append(head + "\n\n" + _bands(city.bands))
+    intro = (
+        "`python -m companion fleet --drones N --hours 1` (6 km x 6 km, radio range 3 km, "
+        "us915-sf7 at 10 % loss, seed 1), one run each (single runs, not medians); wall: "
+        "this machine's seconds for the whole simulation and its report."
+    )
+    return intro + "\n\n" + "\n".join(rows) + "\n\n" + "\n\n".join(tables)
+
+
+def _bands(bands: list[Any]) -> str:
+    lines = [
+        "| in range | drones | drone-h | runs / h | KB / h | channel load | precautions / h "
+        "| conflicts | resolved | false alarms |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for b in bands:
+        span = f"{b.low}-{b.high}" if b.high < 1000 else f"{b.low}+"
+        lines.append(
+            f"| {span} | {b.drones} | {b.drone_hours:.2f} | {b.runs:.1f} | {b.kbytes:.0f} "
+            f"| {b.load:.2f} | {b.precautions:.2f} | {b.conflicts} | {b.resolved} "
+            f"| {b.false_alarms} |"
+        )
+    return "\n".join(lines)
+
+
+BUSY = ("busy_six", "busy_ten", "busy_four_eu868")
+
+
+def busy() -> str:
+    """The busy-sky scenarios (issue 29) in virtual time, one run each."""
+    from companion.sim.replay import run_virtual
+    from companion.sim.report import levels_up
+    from companion.sim.scenario import load_scenario
+
+    lines = [
+        "`python -m companion replay sitl_configs/scenarios/NAME.toml --virtual`, one run each "
+        "(single runs).  Levels up: the most offsets any drone flew above its plan; failed: "
+        "edits that could not be planned or uploaded (all of them: above the 120 m ceiling).",
+        "",
+        "| scenario | link | conflicts resolved | precautions | false alarms | made worse "
+        "| levels up (max) | failed edits | runs unfinished | KB sent per drone (max) "
+        "| all missions flown |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for name in BUSY:
+        print(f"  ... replay {name} --virtual", file=sys.stderr, flush=True)
+        r = run_virtual(load_scenario(SCENARIOS / f"{name}.toml")).report
+        failed = sum(len(d.failures) for d in r.drones)
+        lines.append(
+            f"| {name} | {r.link.profile}, {r.link.loss:.0%} loss "
+            f"| {r.conflicts_resolved}/{r.conflicts} | {r.precautionary_actions} "
+            f"| {r.false_alarms} | {r.made_worse} "
+            f"| {max(levels_up(d, r.offset_m) for d in r.drones)} | {failed} "
+            f"| {sum(d.runs_unfinished for d in r.drones)} "
+            f"| {max(d.bytes_sent for d in r.drones) / 1000:.1f} "
+            f"| {'yes' if r.finished else 'no'} |"
+        )
+    return "\n".join(lines)
+
+
 def sections(repeat: int, data: Path) -> dict[str, Callable[[], str]]:
     return {
         "crypto": lambda: format_crypto(bench_crypto(repeat=repeat)),
@@ -144,6 +241,8 @@ def sections(repeat: int, data: Path) -> dict[str, Callable[[], str]]:
         "replays-px4": lambda: replays(
             os.environ.get("PX4_SITL", ""), ("crossing", "inflight_crossing")
         ),
+        "fleet": fleet,
+        "busy": busy,
         "demo": demo,
     }
 

@@ -265,6 +265,27 @@ def replay(args: argparse.Namespace) -> int:
     return cli.EXIT_OK if report.ok else cli.EXIT_NEGATIVE
 
 
+def fleet(args: argparse.Namespace) -> int:
+    """The fleet simulation: a city's traffic in virtual time, summed up per drone-hour."""
+    from companion.sim.city import CitySpec, city_json, format_city, run_city
+
+    logs.setup("error", None, stderr_level="error", mavsdk=False)
+    spec = CitySpec(
+        drones=args.drones,
+        hours=args.hours,
+        area_km=args.area_km,
+        range_km=args.range_km,
+        seed=args.seed,
+        profile=args.profile,
+        loss=args.loss,
+    )
+    city = run_city(spec, progress=args.progress)
+    if args.out:
+        cli.write_atomic(args.out, json.dumps(city.replay.to_json(), indent=2) + "\n")
+    print(json.dumps(city_json(city), indent=2) if args.json else format_city(city))
+    return cli.EXIT_OK if city.finished else cli.EXIT_NEGATIVE
+
+
 def compare(args: argparse.Namespace) -> int:
     """The protocol's comparison over the simulated radio (the radio is the companion's)."""
     from companion.radio import profile

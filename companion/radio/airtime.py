@@ -59,6 +59,7 @@ class LinkProfile:
     dwell_s: float | None = None  # longest single frame allowed on air
     mtu: int = DEFAULT_MTU
     turnaround_s: float = 0.010  # RX->TX switch and MCU handling per frame
+    channels: int = 1  # channels of the region a link may spread its sessions over
 
     def airtime(self, frame_bytes: int) -> float:
         """Seconds one frame of ``frame_bytes`` occupies the channel."""
@@ -92,9 +93,14 @@ class LinkProfile:
 
 
 def _lora(name: str, sf: int, region: str) -> LinkProfile:
-    if region == "eu868":
+    if region == "eu868":  # the three default channels, 868.1/868.3/868.5 MHz
         return LinkProfile(
-            name, f"LoRa SF{sf}/125 kHz CR4/5, EU868 1 % duty cycle", sf, 125_000, duty_cycle=0.01
+            name,
+            f"LoRa SF{sf}/125 kHz CR4/5, EU868 1 % duty cycle",
+            sf,
+            125_000,
+            duty_cycle=0.01,
+            channels=3,
         )
     if region == "eu868-g3":
         return LinkProfile(
@@ -104,8 +110,13 @@ def _lora(name: str, sf: int, region: str) -> LinkProfile:
             125_000,
             duty_cycle=0.10,
         )
-    return LinkProfile(
-        name, f"LoRa SF{sf}/125 kHz CR4/5, US915 400 ms dwell", sf, 125_000, dwell_s=0.400
+    return LinkProfile(  # a sub-band: eight 125 kHz uplink channels
+        name,
+        f"LoRa SF{sf}/125 kHz CR4/5, US915 400 ms dwell",
+        sf,
+        125_000,
+        dwell_s=0.400,
+        channels=8,
     )
 
 

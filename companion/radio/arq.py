@@ -25,6 +25,11 @@ class LinkTimeout(LinkError):
     """The peer did not answer within the retry bounds or the run's time limit."""
 
 
+class PeerElsewhere(LinkTimeout):
+    """No answer to a session's first message on a link with several channels: the peer is
+    most likely in a run on another channel (what a BUSY refusal says on one channel)."""
+
+
 class PeerAborted(LinkError):
     """The peer ended the session (ABORT frame: end the run, nothing more; on a secured
     session only with its proof, :meth:`LinkEndpoint.secure`)."""

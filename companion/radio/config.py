@@ -23,6 +23,10 @@ class LinkConfig:
     control_reserve: float = 0.1
     latency_allowance_s: float = 0.05
     idle_timeout_s: float | None = None  # None: derived from the profile
+    # channels of the region used (at most the profile's): 1, everything on the one channel;
+    # more, beacons and each session's first message on channel 0, the rest of a session on
+    # a channel of its own (1..channels-1, from its peers and id)
+    channels: int = 1
 
     def idle_timeout(self, profile: LinkProfile) -> float:
         """How long silence from a peer is tolerated.  On a duty-cycled link a peer that spent
@@ -48,3 +52,9 @@ class Session:
     # says is the peer's; without one it is ignored (anybody can put an ABORT on the air).
     abort_check: Callable[[int, bytes], bool] | None = None
     lingering: bool = False  # a finished run kept open to answer a late copy (``linger``)
+    channel: int = 0  # its own channel (several channels): once ``moved``, all of it is there
+    moved: bool = False  # its first message is through: the session is on its own channel
+    listen_on: int = 0  # before that: where its opener listens (its last probe's channel)
+    probes: int = 0
+    ours: bool = False  # we opened it
+    accepted: bool = True  # handed to ``accept`` (a call waits for its first message)

@@ -24,6 +24,7 @@ from companion.radio.arq import (
     MessageTooLarge,
     Outgoing,
     PeerAborted,
+    PeerElsewhere,
     RetransmissionTimer,
 )
 from companion.radio.beacon_frames import BeaconParts, beacon_frames
@@ -48,6 +49,11 @@ from companion.radio.transport import Transport
 from companion.tasks import TaskScope
 
 log = logging.getLogger("companion.radio")
+CALL = b"\x00"  # several channels: a session's first message, on the common channel
+CALL_WAIT_S = 15.0  # a call not followed by a message this soon is forgotten
+GRACE_RTOS = 4.0  # a session closed on its own channel is listened to this many RTOs more
+FIRST_POLLS = 4  # several channels: a first message unanswered after this many probes fails
+# (PeerElsewhere) -- its peer is in a run on another channel, and may be for a minute
 _JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice here
 
 
@@ -74,6 +80,11 @@ class LinkEndpoint:
         if self.payload_size < 16:
             raise ValueError(f"profile {profile.name} leaves no room for payload")
         self.idle_timeout = self.config.idle_timeout(profile)
+        self.channels = self.config.channels
+        if not 1 <= self.channels <= profile.channels:
+            raise ValueError(
+                f"{self.channels} channels: {profile.name} offers 1..{profile.channels}"
+            )
         self.stats = LinkStats()
         self.receiver = Receiver(
             node,
@@ -84,6 +95,10 @@ class LinkEndpoint:
         self.duty = DutyCycle(profile.budget_s, profile.duty_window_s, self.config.control_reserve)
         self.beacons: asyncio.Queue[tuple[int, bytes]] = asyncio.Queue(maxsize=64)
         self.radio = Transmitter(transport, profile, self.duty, self.stats, self.clock)
+        self.radio.listen = self._listening
+        self._active: tuple[int, int] | None = None  # the session the radio listens for
+        self._grace = (0, -math.inf)  # (channel, until): a session just closed there
+        self._closed_on: dict[tuple[int, int], int] = {}  # closed sessions' own channels
         self._sessions: dict[tuple[int, int], Session] = {}
         self._closed: dict[tuple[int, int], float] = {}
         self._aborted: dict[tuple[int, int], Frame] = {}
@@ -137,8 +152,11 @@ class LinkEndpoint:
             session = secrets.randbelow(0xFFFF) + 1
         self._closed.pop((peer, session), None)
         self._aborted.pop((peer, session), None)
-        self._sessions[(peer, session)] = Session(peer, session, self.clock.now())
+        sess = self._sessions[(peer, session)] = Session(peer, session, self.clock.now())
+        sess.channel = self._channel_of(peer)
+        sess.ours = True
         self.receiver.trust(peer, session)  # ours: its replies are kept before anybody's
+        self._listen_for(sess)  # we are about to talk in it
         return session
 
     async def accept(self, timeout: float | None = None) -> tuple[int, int]:
@@ -158,10 +176,21 @@ class LinkEndpoint:
 
     def close_session(self, peer: int, session: int) -> None:
         """Forget a session: its buffers are freed, late frames are ignored."""
-        self._sessions.pop((peer, session), None)
+        sess = self._sessions.pop((peer, session), None)
         self._closed[(peer, session)] = self.clock.now()
+        if sess is not None and sess.moved and sess.channel:
+            self._closed_on[(peer, session)] = sess.channel
         self.receiver.forget_session(peer, session)
         self.receiver.untrust(peer, session)
+        if self._active == (peer, session):
+            self._active = None
+            if sess is not None and sess.moved and sess.channel and sess.accepted:
+                # its peer may not have our last ACK: listen there a little longer (and
+                # answer its polls), as TCP's TIME-WAIT does
+                grace = GRACE_RTOS * self._timer(peer).rto
+                self._grace = (sess.channel, self.clock.now() + grace)
+                self.clock.call_later(grace + 1e-3, self.radio.retune)
+            self.radio.retune()
 
     def secure(self, peer: int, session: int, check: Callable[[int, bytes], bool]) -> None:
         """The session is authenticated above the link: from now on an ABORT ends it only
@@ -174,8 +203,9 @@ class LinkEndpoint:
         """Tell the peer the session is over (three copies, and again whenever it asks for an
         ACK in this session) and close it here; ``proof``: that it is us (keyed sessions)."""
         frame = Frame(FrameType.ABORT, self.node, peer, session, payload=abort_payload(code, proof))
+        channel = self._reply_channel((peer, session))
         for _ in range(3 if self.radio.running else 0):
-            self._enqueue(frame, control=True)
+            self._enqueue(frame, control=True, channel=channel)
         self.close_session(peer, session)
         self._aborted[(peer, session)] = frame  # repeated to whoever still asks (like a RST)
 
@@ -188,6 +218,9 @@ class LinkEndpoint:
             self.close_session(peer, session)
             return
         self._session(peer, session).lingering = True
+        if self._active == (peer, session):
+            self._active = None
+            self.radio.retune()
         self._tasks.spawn(work, f"linger-{peer}-{session}")
 
     @property
@@ -227,11 +260,16 @@ class LinkEndpoint:
     # ------------------------------------------------------------------ messages
 
     async def send(self, peer: int, session: int, data: bytes) -> None:
-        """Deliver ``data`` reliably to ``peer`` (returns once it acknowledged all of it)."""
+        """Deliver ``data`` reliably to ``peer`` (returns once it acknowledged all of it).
+        Several channels: a session we opened first *calls* the peer on the common channel
+        (a one-byte message, :data:`CALL`) and sends everything else on its own channel."""
         sess = self._session(peer, session)
         if len(data) > self.config.max_message:
             raise MessageTooLarge(f"{len(data)} bytes > max_message {self.config.max_message}")
+        if not self._settled(sess) and sess.ours and data != CALL:
+            await self.send(peer, session, CALL)
         async with sess.send_lock:
+            self._listen_for(sess)  # (an answer that waited for the radio takes it now)
             seq, sess.next_seq = sess.next_seq, (sess.next_seq + 1) & 0xFF
             out = Outgoing(
                 self.node,
@@ -242,7 +280,7 @@ class LinkEndpoint:
                 self.payload_size,
                 window=self.config.window,
                 max_tries=self.config.max_tries,
-                max_polls=self.config.max_polls,
+                max_polls=self.config.max_polls if self._settled(sess) else FIRST_POLLS,
             )
             acked = asyncio.Event()
             self._outgoing[(peer, session, seq)] = (out, acked)
@@ -252,13 +290,19 @@ class LinkEndpoint:
                     acked.clear()
                     frames = out.burst()
                     fresh = out.tries[frames[-1].index] == 1
-                    done = [self._enqueue(f, control=False) for f in frames]
+                    channel = self._data_channel(sess)
+                    done = [self._enqueue(f, control=False, channel=channel) for f in frames]
                     sent_at = await done[-1]
                     await self._await_ack(out, acked, sess, sent_at, sample=fresh)
+            except LinkTimeout as exc:
+                if self._settled(sess) or isinstance(exc, PeerElsewhere):
+                    raise
+                raise PeerElsewhere(f"node {peer}: no answer on the common channel") from exc
             finally:
                 del self._outgoing[(peer, session, seq)]
                 self.stats.frames_retransmitted += out.retransmissions
             sess.last_heard = self.clock.now()
+            self._move(sess)  # (its first message is through)
             self.stats.messages_sent += 1
             log.debug(
                 "node %d -> %d session %d: message %d of %d B acknowledged (%d fragments, "
@@ -278,18 +322,23 @@ class LinkEndpoint:
         timer = self._timer(sess.peer)
         while True:
             # Jitter: two nodes that both wait for an ACK must not probe in lockstep, or their
-            # probes collide forever.
-            wait = timer.rto * (1.0 + _JITTER.random() / 2)
+            # probes collide forever.  (A first message on several channels probes without
+            # backing off: a peer that does not answer is elsewhere, not overloaded.)
+            rto = timer.rto if self._settled(sess) else 2 * timer.floor
+            wait = rto * (1.0 + _JITTER.random() / 2)
             try:
                 await self.clock.wait_for(acked.wait(), wait)
             except TimeoutError:
                 self._raise_if_aborted(sess)
-                if self.clock.now() - sess.last_heard < timer.rto:
+                if self.clock.now() - sess.last_heard < rto:
                     continue  # the peer is on the air in this session: it cannot hear a poll
-                timer.timed_out()
+                if self._settled(sess):
+                    timer.timed_out()
                 acked.clear()
                 probe = out.probe()
-                sent_at, sample = await self._enqueue(probe, control=True), False
+                channel = self._probe_channel(sess)
+                sent_at = await self._enqueue(probe, control=True, channel=channel)
+                sample = False
                 self.stats.polls_sent += probe.type is FrameType.POLL
                 continue
             self._raise_if_aborted(sess)
@@ -357,8 +406,75 @@ class LinkEndpoint:
 
     # ------------------------------------------------------------------ radio
 
-    def _enqueue(self, frame: Frame, *, control: bool) -> asyncio.Future[float]:
-        return self.radio.enqueue(frame.encode(), control=control)
+    def _enqueue(self, frame: Frame, *, control: bool, channel: int = 0) -> asyncio.Future[float]:
+        return self.radio.enqueue(frame.encode(), control=control, channel=channel)
+
+    # ------------------------------------------------------------------ channels
+
+    def _channel_of(self, responder: int) -> int:
+        """A session's own channel: 1..channels-1 from the node that answers it (both ends
+        find the same one; its sessions take turns on its one radio anyway, and sessions
+        with other responders are most likely elsewhere), 0 with one channel."""
+        if self.channels == 1:
+            return 0
+        return 1 + responder % (self.channels - 1)
+
+    def _move(self, sess: Session) -> None:
+        """The session's first message is through: the rest of it is on its own channel,
+        and the radio listens there -- unless it is busy with another session of ours."""
+        if not sess.moved:
+            sess.moved = True
+            active = self._sessions.get(self._active) if self._active else None
+            if active is None or active.lingering or active is sess:
+                self._listen_for(sess)
+
+    def _listen_for(self, sess: Session) -> None:
+        if self._active != (sess.peer, sess.session):
+            self._active = (sess.peer, sess.session)
+        self.radio.retune()
+
+    def _settled(self, sess: Session) -> bool:
+        """One channel, or the session's first message is through."""
+        return self.channels == 1 or sess.moved
+
+    def _data_channel(self, sess: Session) -> int:
+        return sess.channel if sess.moved else 0
+
+    def _probe_channel(self, sess: Session) -> int:
+        """Where to ask for an ACK: the session's channel once moved; before, its first
+        message's ACK may have been lost after the peer moved on, so every other probe goes
+        to the session's channel (and the radio listens where the probe went)."""
+        if sess.moved or self.channels == 1:
+            return self._data_channel(sess)
+        sess.probes += 1
+        sess.listen_on = sess.channel if sess.probes % 2 == 0 else 0
+        self._listen_for(sess)
+        return sess.listen_on
+
+    def _reply_channel(self, key: tuple[int, int]) -> int:
+        """Where our ACKs and ABORTs of a session go: its channel once it moved, else the
+        common one (a first message is answered where it came)."""
+        sess = self._sessions.get(key)
+        if sess is None:  # a session just closed answers where it was
+            return self._heard_on(key) if key in self._closed else 0
+        return self._data_channel(sess)
+
+    def _heard_on(self, key: tuple[int, int]) -> int:
+        """A closed session's channel, as its peer may still use it."""
+        return self._closed_on.get(key, 0)
+
+    def _listening(self) -> int:
+        """Where the radio listens between frames: the active session's channel (or, before
+        it moved, where its last probe went), else any open session's that moved, else the
+        common channel."""
+        sess = self._sessions.get(self._active) if self._active else None
+        if sess is not None and not sess.lingering:
+            return sess.channel if sess.moved else sess.listen_on
+        for other in self._sessions.values():
+            if not other.lingering and (other.moved or other.ours):
+                return other.channel if other.moved else other.listen_on
+        channel, until = self._grace
+        return channel if self.clock.now() < until else 0
 
     async def _housekeeping(self) -> None:
         while True:
@@ -370,6 +486,7 @@ class LinkEndpoint:
             for key in [k for k, t in self._closed.items() if now - t > self.idle_timeout]:
                 del self._closed[key]
                 self._aborted.pop(key, None)
+                self._closed_on.pop(key, None)
 
     def _on_bytes(self, data: bytes) -> None:
         try:
@@ -393,11 +510,11 @@ class LinkEndpoint:
         self.receiver.touch(frame.src, frame.session, now)
         if frame.type in (FrameType.DATA, FrameType.POLL) and key in self._aborted:
             if frame.type is FrameType.POLL or frame.flags & Flag.ACK_REQ:
-                self._enqueue(self._aborted[key], control=True)
+                self._enqueue(self._aborted[key], control=True, channel=self._heard_on(key))
         elif frame.type in (FrameType.DATA, FrameType.POLL):
             delivered, ack = self.receiver.on_frame(frame, now)
             if ack is not None:
-                self._enqueue(ack, control=True)
+                self._enqueue(ack, control=True, channel=self._reply_channel(key))
                 self.stats.acks_sent += 1
             if delivered is not None:
                 self._deliver(delivered, now)
@@ -437,5 +554,23 @@ class LinkEndpoint:
             sess = self._sessions[key] = Session(
                 message.src, message.session, now, arrived=message.started
             )
+            sess.channel = self._channel_of(self.node)
+            self._move(sess)  # (its first message is through)
+            if self.channels > 1 and message.data == CALL:
+                # a call: the session's messages follow on its channel, or it is forgotten
+                sess.accepted = False
+                self.clock.call_later(CALL_WAIT_S, self._call_expired, key)
+                return
+            self._accept.put_nowait(key)
+        elif not sess.accepted:
+            sess.accepted = True
             self._accept.put_nowait(key)
         sess.inbox.put_nowait(message.data)
+
+    def _call_expired(self, key: tuple[int, int]) -> None:
+        """A call not followed by a message (lost, or anybody's): back to the common
+        channel."""
+        sess = self._sessions.get(key)
+        if sess is not None and not sess.accepted and not self.receiver.pending_from(*key):
+            self.stats.drop("unanswered_call")
+            self.close_session(*key)

@@ -122,6 +122,10 @@ class Receiver:
     def pending(self) -> int:
         return len(self._partial)
 
+    def pending_from(self, src: int, session: int) -> bool:
+        """A message of this stream is half received."""
+        return any(key[:2] == (src, session) for key in self._partial)
+
     def on_frame(self, frame: Frame, now: float) -> tuple[Delivered | None, Frame | None]:
         """Consume one DATA or POLL frame; return (message completed, ACK frame to send)."""
         key = (frame.src, frame.session, frame.seq)

@@ -14,6 +14,7 @@ import asyncio
 import contextlib
 import random
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from companion.radio.airtime import DutyCycle, LinkProfile
@@ -38,6 +39,7 @@ class _TxItem:
     airtime: float
     control: bool
     done: asyncio.Future[float]
+    channel: int = 0
 
 
 class Transmitter:
@@ -58,13 +60,23 @@ class Transmitter:
         self._control: deque[_TxItem] = deque()
         self._data: deque[_TxItem] = deque()
         self._wake = asyncio.Event()
+        # where the radio listens between frames (several channels: the endpoint's choice)
+        self.listen: Callable[[], int] = lambda: 0
+        self._tune: Callable[[int], None] | None = getattr(transport, "tune", None)
+        self._sending = False
 
-    def enqueue(self, data: bytes, *, control: bool) -> asyncio.Future[float]:
-        """Queue one encoded frame; the future gives the link time it finished leaving."""
+    def retune(self) -> None:
+        """Listen where :attr:`listen` says now (after the frame on the air, if one is)."""
+        if self._tune is not None and not self._sending:
+            self._tune(self.listen())
+
+    def enqueue(self, data: bytes, *, control: bool, channel: int = 0) -> asyncio.Future[float]:
+        """Queue one encoded frame (to go on ``channel`` of the region); the future gives
+        the link time it finished leaving."""
         if not self.running:
             raise self.error or LinkError("link endpoint is not running")
         done: asyncio.Future[float] = asyncio.get_running_loop().create_future()
-        item = _TxItem(data, self.profile.airtime(len(data)), control, done)
+        item = _TxItem(data, self.profile.airtime(len(data)), control, done, channel)
         (self._control if control else self._data).append(item)
         self._wake.set()
         return done
@@ -113,6 +125,8 @@ class Transmitter:
                 self.stats.duty_wait_s += self.clock.now() - now
                 continue  # re-evaluate: a control frame may have arrived
             sense = getattr(self.transport, "channel_busy", None)
+            if self._tune is not None:
+                self._tune(item.channel)  # (listen before talk on the frame's channel)
             if deferred_since is None:
                 deferred_since = now
             if sense is not None and sense() and now - deferred_since < patience:
@@ -125,10 +139,16 @@ class Transmitter:
             if item.done.cancelled():
                 continue
             self.duty.record(now, item.airtime)
-            await self.transport.transmit(item.data, item.airtime)
+            self._sending = True
+            try:
+                await self.transport.transmit(item.data, item.airtime)
+            finally:
+                self._sending = False
             self.stats.frames_sent += 1
             self.stats.bytes_sent += len(item.data)
             self.stats.airtime_s += item.airtime
+            if self._tune is not None:
+                self._tune(self.listen())
             if not item.done.done():
                 item.done.set_result(self.clock.now())
             await self.clock.sleep(self.profile.turnaround_s)

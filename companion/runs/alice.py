@@ -28,6 +28,7 @@ from companion.neighbours.beacon import keys_hash
 from companion.neighbours.neighbourhood import Neighbourhood
 from companion.neighbours.peers import Peer, time_to_meet
 from companion.neighbours.registry import Neighbour
+from companion.radio.arq import PeerElsewhere
 from companion.radio.endpoint import LinkEndpoint
 from companion.roles import Phase, Role
 from companion.runs.budget import ALICE, MAX_RUN_WORK, BudgetExceeded, RunLedger, run_work
@@ -56,6 +57,7 @@ BOB_GUESS = 4  # Bob's size before he tells it: a remaining route of a few legs 
 # stretch the horizon of a long route over everything; the run watch uses his real size)
 QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a full run
 GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet channel
+IDLE_BEACONS = 2.0  # several channels: a peer heard within this many beacon intervals is idle
 
 
 class AliceRuns:
@@ -156,7 +158,18 @@ class AliceRuns:
         if not ready:
             return None
         urgency = self.neighbourhood.urgency
-        return min(ready, key=lambda p: (p.plan[0][0] is not Phase.NEAR, urgency(p)))
+        # Several channels: a peer in a run elsewhere does not hear us (nor beacons): one
+        # heard lately on the common channel goes first
+        lately = now - IDLE_BEACONS * self.settings.beacon_interval_s
+        elsewhere = (lambda p: p.heard_at < lately) if self.endpoint.channels > 1 else None
+        return min(
+            ready,
+            key=lambda p: (
+                p.plan[0][0] is not Phase.NEAR,
+                elsewhere is not None and elsewhere(p),
+                urgency(p),
+            ),
+        )
 
     async def _turn(self, peer: Peer, phase: Phase, horizon: int) -> bool:
         """The run, once the radio is ours; a bug in it is recorded, never fatal."""
@@ -482,6 +495,9 @@ class AliceRuns:
                 if self._refused(peer, phase, exc, grid, first=attempt == 0):
                     continue  # the peer lost our setup: a fresh one
                 return False
+            except PeerElsewhere:
+                self._later(peer, phase)  # in a run on another channel: as if BUSY
+                return False
             except (ProtocolError, CompanionError) as exc:
                 self._failed(peer, phase, exc)
                 return False
@@ -605,6 +621,14 @@ class AliceRuns:
             failure = PeerFailure(peer=peer.node, phase=phase, error=str(exc))
         self.record(EventKind.RUN_FAILED, failure)
 
+    def _later(self, peer: Peer, phase: Phase) -> None:
+        """The peer's own run is on the air: not a failure, ask again soon (at a random
+        moment: others it turned away are waiting too)."""
+        low, high = self.settings.busy_retry_s
+        peer.retry_in = low + (high - low) * secrets.randbelow(1001) / 1000
+        peer.busy = True
+        self.record(EventKind.PEER_BUSY, PeerNote(peer=peer.node, phase=phase))
+
     def _refused(
         self, peer: Peer, phase: Phase, exc: PeerRefused, grid: GridSpec, *, first: bool
     ) -> bool:
@@ -619,12 +643,7 @@ class AliceRuns:
             self.record(EventKind.YIELDED, PeerNote(peer=peer.node, reason="the peer is Alice"))
             return False
         if exc.code is Refusal.BUSY:
-            # Its own run is on the air: not a failure, ask again soon (at a random moment:
-            # others it refused are waiting too).
-            low, high = self.settings.busy_retry_s
-            peer.retry_in = low + (high - low) * secrets.randbelow(1001) / 1000
-            peer.busy = True
-            self.record(EventKind.PEER_BUSY, PeerNote(peer=peer.node, phase=phase))
+            self._later(peer, phase)
             return False
         if exc.code is Refusal.UNKNOWN_PEER:
             self.sender.send_certificate()  # it lacks our certificate: beacon it

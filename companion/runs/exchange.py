@@ -38,7 +38,7 @@ from typing import TypeVar
 
 from companion.auth.session import Accepted, AuthenticationError, Initiator, Refusal, Responder
 from companion.errors import CompanionError
-from companion.radio.arq import LinkError, LinkTimeout, PeerAborted
+from companion.radio.arq import LinkError, LinkTimeout, PeerAborted, PeerElsewhere
 from companion.radio.endpoint import LinkEndpoint
 from companion.radio.frames import AbortCode
 from companion.roles import Role
@@ -217,7 +217,7 @@ async def _guard(
     except ProtocolError:
         party.abort(AbortCode.PROTOCOL)
         raise
-    except (PeerAborted, PeerRefused):
+    except (PeerAborted, PeerRefused, PeerElsewhere):  # (elsewhere: it would not hear an ABORT)
         party.machine.abort()
         endpoint.close_session(peer, session)
         raise

@@ -3,14 +3,16 @@
 :class:`Channel` decides who hears a frame and when: seeded random loss, bit corruption and
 truncation, duplication, reordering (extra delay) and latency per receiver, plus the physics a
 single LoRa channel has -- a frame that overlaps another transmission is lost (collision) and a
-half-duplex node hears nothing while it transmits.  :class:`SimMedium` attaches any number of
-nodes to one channel in the same process; the UDP hub (``udp``) reuses the channel so that
-separate processes share it.
+half-duplex node hears nothing while it transmits.  With a ``reach`` (radio range, a busy sky)
+a node hears, senses and is disturbed only by the radios in its reach.  :class:`SimMedium`
+attaches any number of nodes to one channel in the same process; the UDP hub (``udp``) reuses
+the channel so that separate processes share it.
 """
 
 from __future__ import annotations
 
 import random
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from companion.radio.clock import Clock
@@ -55,6 +57,7 @@ class OnAir:
     data: bytes
     start: float
     end: float
+    freq: int = 0  # which of the region's channels
 
 
 @dataclass
@@ -64,34 +67,77 @@ class Channel:
     collisions: bool = True
     carrier_sense: bool = True  # radios detect channel activity before they transmit
     stats: ChannelStats = field(default_factory=ChannelStats)
+    # reach(a, b): node b's radio is within range of node a's now (None: all hear all)
+    reach: Callable[[int, int], bool] | None = None
+    keep_log: bool = False  # keep (start, end, src) of every transmission in ``log``
 
     def __post_init__(self) -> None:
         # A simulation's random source: seeded for reproducible runs, never used for keys.
         self._rng = random.Random(self.seed)  # noqa: S311
         self._air: list[OnAir] = []
         self.nodes: set[int] = set()
+        self.log: list[tuple[float, float, int]] = []
+        self._longest = 0.0  # the longest frame yet on the air
+        # one transceiver per node: the channel it is tuned to, and since when
+        self.tuned: dict[int, tuple[int, float]] = {}
+
+    def tune(self, node: int, freq: int, now: float) -> None:
+        """Node ``node``'s radio listens (and sends) on channel ``freq`` from ``now`` on."""
+        if self.tuned.get(node, (0, 0.0))[0] != freq:
+            self.tuned[node] = (freq, now)
+
+    def _freq(self, node: int) -> int:
+        return self.tuned[node][0] if node in self.tuned else 0
 
     def begin(self, src: int, data: bytes, start: float, airtime: float) -> OnAir:
         self._air = [t for t in self._air if t.end > start - 60.0]
-        tx = OnAir(src, data, start, start + airtime)
+        tx = OnAir(src, data, start, start + airtime, self._freq(src))
+        self._longest = max(self._longest, airtime)
         self._air.append(tx)
         self.stats.transmitted += 1
+        if self.keep_log:
+            self.log.append((start, tx.end, src))
         return tx
 
     def busy(self, node: int, now: float) -> bool:
         """Another node's frame is on the air at ``now`` (what LoRa channel activity
         detection tells a radio before it transmits)."""
-        return any(t.src != node and t.start <= now < t.end for t in self._air)
+        reach, freq = self.reach, self._freq(node)
+        for t in reversed(self._air):  # (in the order they began)
+            if t.start < now - self._longest:
+                return False  # all earlier ones have ended
+            if (
+                t.src != node
+                and t.freq == freq
+                and t.start <= now < t.end
+                and (reach is None or reach(t.src, node))
+            ):
+                return True
+        return False
 
     def end(self, tx: OnAir) -> list[tuple[int, float, bytes]]:
         """Who receives ``tx``: (node, delay after the end of transmission, bytes)."""
         overlapping = [
-            t for t in self._air if t is not tx and t.start < tx.end and t.end > tx.start
+            t
+            for t in self._air
+            if t is not tx and t.start < tx.end and t.end > tx.start and t.freq == tx.freq
         ]
         collided = self.collisions and any(t.src != tx.src for t in overlapping)
         out: list[tuple[int, float, bytes]] = []
-        imp, rng = self.impairments, self._rng
+        imp, rng, reach = self.impairments, self._rng, self.reach
         for node in sorted(self.nodes - {tx.src}):
+            if node in self.tuned:
+                freq, since = self.tuned[node]
+                if freq != tx.freq or since > tx.start:
+                    continue  # listening elsewhere (for part of the frame at least)
+            elif tx.freq != 0:
+                continue
+            if reach is not None:
+                if not reach(tx.src, node):
+                    continue  # out of range: not even noise
+                collided = self.collisions and any(
+                    t.src not in (tx.src, node) and reach(t.src, node) for t in overlapping
+                )
             if any(t.src == node for t in overlapping):
                 self.stats.half_duplex += 1
                 continue
@@ -155,6 +201,10 @@ class SimTransport:
 
     def set_receiver(self, callback: Receiver) -> None:
         self.medium._receivers[self.node] = callback
+
+    def tune(self, freq: int) -> None:
+        """Listen and send on channel ``freq`` of the region (0: the common one)."""
+        self.medium.channel.tune(self.node, freq, self.medium.clock.now())
 
     def channel_busy(self) -> bool:
         channel = self.medium.channel

@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import socket
 import sys
 import tempfile
@@ -34,12 +35,13 @@ from companion.mission.personalities import personality
 from companion.mission.planner import OffsetSettings
 from companion.mission.schedule import SeparationSettings
 from companion.radio import Clock, LinkEndpoint, LinkProfile, profile
+from companion.radio.config import LinkConfig
 from companion.runs.failsafe import FailsafeSettings
 from companion.settings import Credentials
 from companion.sim.fleet import make_fleet
 from companion.sim.inproc import InProcessVehicle
 from companion.sim.medium import Channel, Impairments, SimMedium
-from companion.sim.metrics import build_report
+from companion.sim.metrics import SCREEN_FROM, build_report
 from companion.sim.mock_autopilot import Faults, FlightModel, MockAutopilot
 from companion.sim.paced_clock import PacedClock
 from companion.sim.px4 import Px4Build
@@ -138,6 +140,9 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
     }
     started: set[int] = set()
     t, dt = 0.0, 1.0 / rate
+    # a busy sky's vehicles on the ground (before take-off, after landing) a step a second,
+    # as the virtual replay's own vehicles are
+    sparse = len(scenario.drones) > SCREEN_FROM
     while t < scenario.time_limit_s:
         waiting = [d.takeoff_delay_s for d in scenario.drones if d.id not in started]
         if waiting and not any(m.flying for m in mocks.values()) and min(waiting) > t + dt:
@@ -149,6 +154,8 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
         for d in scenario.drones:
             mock = mocks[d.id]
             if d.id not in started and t >= d.takeoff_delay_s:
+                if sparse and t - mock.craft.t > 1e-9:
+                    mock.advance(t - mock.craft.t)  # (parked until now)
                 mock.take_off()
                 started.add(d.id)
             if d.pause is not None and d.id in started:
@@ -157,7 +164,12 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
                     mock.pause()
                 elif at + length <= t < at + length + dt:
                     mock.resume()
-            mock.advance(dt)
+            if not sparse:
+                mock.advance(dt)
+            elif mock.mission_running or mock.holding or mock.flying:
+                mock.advance(t + dt - mock.craft.t)
+            elif t + dt - mock.craft.t >= 1.0 - 1e-9:
+                mock.advance(t + dt - mock.craft.t)
         t += dt
         if len(started) == len(mocks) and not any(
             m.mission_running or m.holding for m in mocks.values()
@@ -166,10 +178,17 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
     return {k: m.trajectory for k, m in mocks.items()}
 
 
-def run_virtual(scenario: Scenario, *, progress: bool = False) -> Replay:
+def run_virtual(
+    scenario: Scenario,
+    *,
+    progress: bool = False,
+    channel_log: list[tuple[float, float, int]] | None = None,
+) -> Replay:
     """Fly ``scenario`` in virtual time (:func:`run_replay` with ``virtual``, on its own
     :class:`~companion.radio.clock.VirtualTimeLoop`)."""
-    return run_simulated(run_replay(scenario, progress=progress, virtual=True))
+    return run_simulated(
+        run_replay(scenario, progress=progress, virtual=True, channel_log=channel_log)
+    )
 
 
 def _vehicle(
@@ -240,6 +259,7 @@ class _Script:
         self.scenario, self.vehicles, self.say = scenario, vehicles, say
         self.companions, self.vanished = companions, vanished
         self.started: set[int] = set()
+        self.powered = {d.id for d in scenario.drones if d.companion_start_s <= 0}
         self.paused: dict[int, bool] = {}  # held by the scenario (False), and flying on (True)
         self.told = {d.id: 0 for d in scenario.drones}  # companion events already told
 
@@ -265,6 +285,7 @@ class _Script:
                     self.say(f"t={event.t:.0f} s: drone {ident}: {_story(event)}")
             self.told[ident] = len(companion.events)
         for d in self.scenario.drones:
+            await self._power(d, sim)
             await self._vanish(d, sim)
             await self._pause(d, sim)
             waiting = (
@@ -276,6 +297,20 @@ class _Script:
                 await self.vehicles[d.id].take_off()
                 self.started.add(d.id)
                 self.say(f"t={sim:.0f} s: drone {d.id} takes off")
+
+    async def _power(self, d: DroneSpec, sim: float) -> None:
+        """A companion that powers up late (before its take-off), and off once landed."""
+        companion = self.companions.get(d.id)
+        if companion is None:
+            return
+        if d.id not in self.powered and sim >= d.companion_start_s:
+            await companion.start()
+            self.powered.add(d.id)
+            self.say(f"t={sim:.0f} s: drone {d.id}'s companion powers up")
+        elif d.companion_off_landed and d.id in self.started and not self.vehicles[d.id].flying:
+            await companion.stop()
+            self.vanished[d.id] = self.companions.pop(d.id)
+            self.say(f"t={sim:.0f} s: drone {d.id} has landed, its companion is off")
 
     async def _vanish(self, d: DroneSpec, sim: float) -> None:
         gone = self.companions.get(d.id)
@@ -353,10 +388,44 @@ def _clock(
     return ts, paced, clock
 
 
-def _radio(scenario: Scenario, clock: Clock) -> tuple[SimMedium, LinkProfile]:
-    """The shared simulated channel and the link profile of the scenario."""
-    medium = SimMedium(Channel(Impairments(loss=scenario.loss), scenario.seed), clock)
-    return medium, profile(scenario.link_profile)
+def _radio(
+    scenario: Scenario, clock: Clock, vehicles: dict[int, ReplayVehicle]
+) -> tuple[SimMedium, LinkProfile]:
+    """The shared simulated channel and the link profile of the scenario (radios in range
+    of each other where the vehicles are, when it has a radio range)."""
+    channel = Channel(Impairments(loss=scenario.loss), scenario.seed)
+    if scenario.radio_range_m is not None:
+        channel.reach = _in_range(scenario.radio_range_m, clock, vehicles)
+    return SimMedium(channel, clock), profile(scenario.link_profile)
+
+
+def _in_range(
+    range_m: float, clock: Clock, vehicles: dict[int, ReplayVehicle]
+) -> Callable[[int, int], bool]:
+    """reach(a, b): the vehicles of nodes a and b (their last track points) are at most
+    ``range_m`` apart on the ground; positions are looked up once per instant."""
+    k = math.pi / 180.0 * 6_371_000.0
+    limit = range_m * range_m
+    seen: dict[int, tuple[float, float]] = {}
+    instant = [math.nan]
+
+    def where(node: int) -> tuple[float, float]:
+        now = clock.now()
+        if now != instant[0]:
+            seen.clear()
+            instant[0] = now
+        point = seen.get(node)
+        if point is None:
+            track = vehicles[node].trajectory
+            lat, lon = (track[-1][1], track[-1][2]) if track else (0.0, 0.0)
+            point = seen[node] = (lat * k, lon * k * math.cos(math.radians(lat)))
+        return point
+
+    def reach(a: int, b: int) -> bool:
+        (ya, xa), (yb, xb) = where(a), where(b)
+        return (ya - yb) ** 2 + (xa - xb) ** 2 <= limit
+
+    return reach
 
 
 def _fleet(scenario: Scenario, root: Path) -> dict[int, Credentials]:
@@ -397,6 +466,7 @@ async def _bring_up(
     """Start every drone's vehicle, autopilot link and companion on the shared channel (into
     ``mocks``, ``autopilots`` and ``companions`` as they come up: what is up is shut down)."""
     medium, link = radio
+    specs = {d.id: d for d in scenario.drones}
     flight = FlightModel(
         cruise_m_s=scenario.cruise_m_s,
         time_scale=1.0 if virtual else ts,
@@ -409,13 +479,17 @@ async def _bring_up(
         ap = await _autopilot(vehicle, d)
         autopilots.append(ap)
         settings = _settings(d, scenario, vehicle.api_url)
-        endpoint = LinkEndpoint(d.id, medium.attach(d.id), link, clock=clock)
+        endpoint = LinkEndpoint(
+            d.id, medium.attach(d.id), link, LinkConfig(channels=scenario.channels), clock=clock
+        )
         companions[d.id] = Companion(settings, endpoint, ap, fleet[d.id])
         via = "MAVSDK" if isinstance(ap, Autopilot) else "no MAVLink"
         say(f"drone {d.id}: {vehicle.kind} vehicle up ({via})")
     # The companions start together: one set up earlier would have the radio (and its
-    # first runs) to itself while the others' vehicles still start.
-    await asyncio.gather(*(companion.start() for companion in companions.values()))
+    # first runs) to itself while the others' vehicles still start.  (A drone whose
+    # companion powers up later is started by the script.)
+    now = [c for k, c in companions.items() if specs[k].companion_start_s <= 0]
+    await asyncio.gather(*(companion.start() for companion in now))
     say("companions up")
 
 
@@ -449,16 +523,19 @@ async def run_replay(
     px4: Px4Build | None = None,
     px4_speed_max: float = PX4_SPEED_MAX,
     virtual: bool = False,
+    channel_log: list[tuple[float, float, int]] | None = None,
 ) -> Replay:
     """Fly ``scenario``: mock autopilots over MAVLink and MAVSDK, PX4 SITL vehicles from the
     build ``px4`` (their speed factor, and so the replay's time scale, at most
     ``px4_speed_max``), or -- ``virtual`` -- mock vehicles in this process
     (:mod:`companion.sim.inproc`) on a virtual clock (run it on a
-    :class:`~companion.radio.clock.VirtualTimeLoop`: :func:`run_virtual`)."""
+    :class:`~companion.radio.clock.VirtualTimeLoop`: :func:`run_virtual`).  ``channel_log``
+    receives every transmission on the channel, (start, end, node) in simulated seconds."""
     _check(scenario, px4, virtual=virtual)
     ts, paced, clock = _clock(scenario, px4, px4_speed_max, virtual=virtual)
-    radio = _radio(scenario, clock)
     mocks: dict[int, ReplayVehicle] = {}
+    radio = _radio(scenario, clock, mocks)
+    radio[0].channel.keep_log = channel_log is not None
     companions: dict[int, Companion] = {}
     vanished: dict[int, Companion] = {}
     autopilots: list[AutopilotBase] = []
@@ -489,6 +566,8 @@ async def run_replay(
         held = await _shut_down(companions, autopilots, mocks, say)
         await _stop_ticker(paced, ticker, say)
         state.cleanup()
+    if channel_log is not None:
+        channel_log.extend((s - origin, e - origin, n) for s, e, n in radio[0].channel.log)
     baseline = _fly_offline(scenario)
     return Replay(
         build_report(

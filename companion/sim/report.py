@@ -260,7 +260,7 @@ def shown_pairs(report: ReplayReport) -> list[PairReport]:
     return [p for p in report.pairs if came_near(report, p)]
 
 
-def _levels_up(d: DroneReport, offset_m: float) -> int:
+def levels_up(d: DroneReport, offset_m: float) -> int:
     """How many offsets above its plan the drone flew at most: its largest raise in any
     verified edit (a precaution's climb, undone later, counts)."""
     raised = [abs(float(v)) for e in d.edits for v in e.get("raises", {}).values()]
@@ -280,7 +280,7 @@ def drone_table(report: ReplayReport) -> list[str]:
         broke = len(d.failures) - failed
         edit = d.edit.value + (f" ({broke} failure(s))" if broke else "")
         lines.append(
-            f"  {d.id:>5}  {_levels_up(d, report.offset_m):>9}  {edit:<10}  "
+            f"  {d.id:>5}  {levels_up(d, report.offset_m):>9}  {edit:<10}  "
             f"{len(d.precautionary):>11}  {len(d.runs):>7}  {failed:>6}  "
             f"{d.runs_unfinished:>10}  {d.bytes_sent:>8}  {d.airtime_s:>9.1f}"
         )

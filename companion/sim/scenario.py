@@ -11,6 +11,7 @@ A scenario::
     profile = "us915-sf7"
     loss = 0.1
     seed = 1
+    channels = 1             # optional: of the region's channels (us915: 8, eu868: 3)
     [[drone]]
     id = 1
     mission = "a.plan"       # relative to the scenario file
@@ -57,6 +58,8 @@ class DroneSpec:
     hold_for_comparisons: bool = True  # on the ground, take-off waits for a running run
     operator: str = "fleet"  # whose certificate it flies with
     pause: tuple[float, float] | None = None  # held in flight (at, for how long), simulated
+    companion_start_s: float = 0.0  # its companion powers up at this simulated time
+    companion_off_landed: bool = False  # ... and off once its mission is flown
 
     @property
     def path(self) -> FlightPath:
@@ -85,6 +88,8 @@ class Scenario:
     failsafe: Action = Action.CLIMB
     untrusted_operators: frozenset[str] = frozenset()  # not in the other drones' trust stores
     unknown_peers: UnknownPeers = UnknownPeers.IGNORE
+    radio_range_m: float | None = None  # radios farther apart do not hear each other
+    channels: int = 1  # of the region's, used by the links (companion.radio.config)
 
     def trusted_pair(self, a: DroneSpec, b: DroneSpec) -> bool:
         """Both drones deconflict with each other (neither is of an untrusted operator)."""
@@ -104,6 +109,12 @@ def load_scenario(path: str | Path) -> Scenario:
     link_profile = link.text("profile", "us915-sf7", list(PROFILES))
     loss = link.number("loss", 0.0, low=0.0, high=MAX_LOSS)
     seed = link.optional_integer("seed", low=0)
+    channels = link.integer("channels", 1, low=1)
+    if channels > PROFILES[link_profile].channels:
+        raise link.fail(
+            f"{channels} is out of range ({link_profile} has {PROFILES[link_profile].channels})",
+            "channels",
+        )
     drones = _drones(doc, path)
     failsafe = doc.text("failsafe", "climb", [a.value for a in Action])
     untrusted = doc.strings("untrusted_operators")
@@ -129,6 +140,7 @@ def load_scenario(path: str | Path) -> Scenario:
         failsafe=Action(failsafe),
         untrusted_operators=frozenset(untrusted),
         unknown_peers=UnknownPeers(policy),
+        channels=channels,
     )
     doc.finish()
     return scenario

@@ -144,6 +144,8 @@ GOOD_DRONES = "[[drone]]\nid = 1\nmission = 'a.plan'\n[[drone]]\nid = 2\nmission
         ("[link]\nprofle = 'us915-sf9'\n" + GOOD_DRONES, "unknown key 'profle'"),
         ("[link]\nlos = 0.1\n" + GOOD_DRONES, "unknown key 'los' .did you mean 'loss'"),
         ("[link]\nloss = 1.5\n" + GOOD_DRONES, "loss: 1.5 is out of range"),
+        ("[link]\nchannels = 9\n" + GOOD_DRONES, "channels: 9 is out of range .us915-sf7 has 8"),
+        ("[link]\nchannels = 0\n" + GOOD_DRONES, "channels: 0 is out of range"),
         ("[[drone]]\nid = 1\nmission = 'a.plan'\n", "at least two"),
         (GOOD_DRONES.replace("id = 1", "id = 1\ntakeof_delay_s = 5"), "drone 1: unknown key"),
         (GOOD_DRONES.replace("id = 2", "id = 1"), "drone 2: id: 1 is taken"),
