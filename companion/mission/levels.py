@@ -93,16 +93,17 @@ def clear_raise(
     vertical_m: float,
     direction: float = 1.0,
     others: Iterable[Slots] = (),
+    limit_m: float = MAX_RAISE_M,
 ) -> float:
-    """The least raise (a multiple of SLOT_M, at least ``offset_m``; negative for
-    ``direction`` -1) after which ``band`` is at least ``vertical_m`` clear of every
-    conflicting peer's slots -- above its lowest occupied interval, above or below each other
-    one -- and of every slot of ``others`` (peers it does not conflict with where it flies
-    now: above or below)."""
+    """The least raise (a multiple of SLOT_M, at least ``offset_m``, at most ``limit_m``;
+    negative for ``direction`` -1) after which ``band`` is at least ``vertical_m`` clear of
+    every conflicting peer's slots -- above its lowest occupied interval, above or below each
+    other one -- and of every slot of ``others`` (peers it does not conflict with where it
+    flies now: above or below)."""
     occupied = [(slots.intervals(), 1) for slots in peers]
     occupied += [(slots.intervals(), 0) for slots in others]
     steps = math.ceil(offset_m / SLOT_M)
-    while steps * SLOT_M <= MAX_RAISE_M:
+    while steps * SLOT_M <= min(limit_m, MAX_RAISE_M) + 1e-9:
         delta = direction * steps * SLOT_M
         low, high = band[0] + delta, band[1] + delta
         if all(
@@ -112,7 +113,9 @@ def clear_raise(
         ):
             return delta
         steps += 1
-    raise NoClearAltitude(f"no altitude within {MAX_RAISE_M:.0f} m clears the peers' slots")
+    raise NoClearAltitude(
+        f"no altitude within {min(limit_m, MAX_RAISE_M):.0f} m clears the peers' slots"
+    )
 
 
 def plan_raises(
@@ -124,23 +127,38 @@ def plan_raises(
     vertical_m: float,
     direction: float = 1.0,
     keep_clear: Iterable[int] = (),
-) -> dict[int, float]:
+    headroom: Mapping[int, float] | None = None,
+) -> tuple[dict[int, float], list[int]]:
     """Segment -> raise (metres) for the conflicts found and the precautions taken (peer ->
     segments): each clear of the slots of the peers it conflicts with (``slots``, peer ->
     announced), its band (``bands``: the segment's planned band, AMSL) raised, and clear of
     the slots of the peers in ``keep_clear`` too: a run compared the altitudes we fly
     without raises, so a raise must not bring a segment into the altitudes of a peer that
-    runs found clear of them.  A precaution is a conflict until its result is in."""
+    runs found clear of them.  A precaution is a conflict until its result is in.
+
+    ``headroom`` (segment -> metres up to the ceiling) bounds each raise: a segment no raise
+    under it clears stays where it is and is returned among the unresolved -- the rest are
+    still raised (an edit refused whole at the ceiling left every conflict unresolved).  It
+    is never raised into a peer kept clear of instead: runs compared our unraised path, so
+    nobody would see that conflict.  Returns (raises, unresolved segments)."""
     peers_of: dict[int, set[int]] = {}
     for table in (conflicts, precautions):
         for peer, segments in table.items():
             for segment in segments:
                 peers_of.setdefault(segment, set()).add(peer)
     out: dict[int, float] = {}
+    unresolved: list[int] = []
     for segment, peers in sorted(peers_of.items()):
         announced = [slots.get(peer, Slots()) for peer in peers]
         others = [slots[p] for p in keep_clear if p not in peers and p in slots]
-        out[segment] = clear_raise(
-            bands[segment], announced, offset_m, vertical_m, direction, others
-        )
-    return out
+        limit = MAX_RAISE_M if headroom is None else headroom.get(segment, MAX_RAISE_M)
+        band = bands[segment]
+        try:
+            out[segment] = clear_raise(
+                band, announced, offset_m, vertical_m, direction, others, limit
+            )
+        except NoClearAltitude:
+            if headroom is None:
+                raise
+            unresolved.append(segment)
+    return out, unresolved

@@ -169,20 +169,33 @@ class Edits:
         recorded).  A raise only grows while its conflict stands: a peer whose announced
         slots shrink (it flew on, it landed) is no reason for another edit in flight."""
         offset = self.settings.offset
+        bands = self.flight.planned_bands()
+        # up to the ceiling (metres above home): the planned top of each band is its top
+        # less our altitude error
+        ceiling = self.flight.home_deg()[2] + offset.max_altitude_m
+        error = self.settings.separation.tolerance.altitude_m
+        headroom = {k: ceiling - (top - error) for k, (_, top) in bands.items()}
         try:
-            raises = plan_raises(
+            raises, unresolved = plan_raises(
                 {node: p.conflicts for node, p in self.peers.items()},
                 self.precaution,
                 {node: p.beacon.slots for node, p in self.peers.items()},
-                self.flight.planned_bands(),
+                bands,
                 offset.offset_m,
                 self.settings.separation.vertical_m,
                 1.0 if offset.direction == "up" else -1.0,
                 keep_clear=clear_of,
+                headroom=headroom if offset.direction == "up" else None,
             )
         except NoClearAltitude as exc:
             self.ctx.record(EventKind.PLAN_FAILED, Problem(error=str(exc)))
             return None
+        if unresolved:
+            error_text = (
+                f"segments {unresolved}: no altitude under the ceiling "
+                f"({offset.max_altitude_m:g} m) clears the peers they conflict with"
+            )
+            self.ctx.record(EventKind.PLAN_FAILED, Problem(error=error_text))
         held = self.flight.raises
         return {k: max(v, held.get(k, v), key=abs) for k, v in raises.items()}
 

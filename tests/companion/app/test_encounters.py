@@ -228,9 +228,26 @@ def test_precautions_take_raises_like_conflicts() -> None:
     conflicts found (peer 3 announces nothing: the offset)."""
     bands = {k: (517.0, 519.0) for k in range(4)}
     two = Slots.of([(517.0, 519.0), (532.0, 534.0)])
-    assert plan_raises({}, {2: {1, 2}}, {2: two}, bands, 10.0, 10.0) == {1: 30.0, 2: 30.0}
-    assert plan_raises({3: {0}}, {2: {1}}, {2: two}, bands, 10.0, 10.0) == {0: 10.0, 1: 30.0}
-    assert plan_raises({2: set()}, {}, {2: two}, bands, 10.0, 10.0) == {}
+    assert plan_raises({}, {2: {1, 2}}, {2: two}, bands, 10.0, 10.0) == ({1: 30.0, 2: 30.0}, [])
+    assert plan_raises({3: {0}}, {2: {1}}, {2: two}, bands, 10.0, 10.0) == ({0: 10.0, 1: 30.0}, [])
+    assert plan_raises({2: set()}, {}, {2: two}, bands, 10.0, 10.0) == ({}, [])
+
+
+def test_a_raise_stops_at_the_ceiling_and_the_others_still_fly() -> None:
+    """Segment 1's conflict needs 30 m, its headroom is 20 m: it stays where it is (returned
+    as unresolved, nothing raised into a peer's altitudes), segment 0's 10 m still flies --
+    an edit refused whole at the ceiling left every conflict unresolved.  A raise that fits
+    is the same as without a ceiling; without one, no clear altitude is still an error."""
+    bands = {k: (517.0, 519.0) for k in range(2)}
+    two = Slots.of([(517.0, 519.0), (532.0, 534.0)])
+    found = plan_raises({3: {0}}, {2: {1}}, {2: two}, bands, 10.0, 10.0, headroom={0: 20, 1: 20})
+    assert found == ({0: 10.0}, [1])
+    roomy = plan_raises({3: {0}}, {2: {1}}, {2: two}, bands, 10.0, 10.0, headroom={0: 30, 1: 30})
+    assert roomy == ({0: 10.0, 1: 30.0}, [])
+    wall = Slots.of([(500.0, 2000.0)])
+    with pytest.raises(NoClearAltitude):
+        plan_raises({2: {0}}, {}, {2: wall}, bands, 10.0, 10.0)
+    assert plan_raises({2: {0}}, {}, {2: wall}, bands, 10.0, 10.0, headroom={0: 100}) == ({}, [0])
 
 
 def test_planner_raises() -> None:
