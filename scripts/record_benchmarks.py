@@ -197,7 +197,8 @@ def busy() -> str:
     lines = [
         "`python -m companion replay sitl_configs/scenarios/NAME.toml --virtual`, one run each "
         "(single runs).  Levels up: the most offsets any drone flew above its plan; failed: "
-        "edits that could not be planned or uploaded (all of them: above the 120 m ceiling).",
+        "edits (or segments of one) that could not be planned or uploaded -- here all for want "
+        "of an altitude under the 120 m ceiling.",
         "",
         "| scenario | link | conflicts resolved | precautions | false alarms | made worse "
         "| levels up (max) | failed edits | runs unfinished | KB sent per drone (max) "
