@@ -119,7 +119,11 @@ class TaskScope:
             raise RuntimeError(f"{self.name}: not open")
         hook = on_failure if on_failure is not None else self._on_failure
         task = f"{self.name}-{name}"
-        return self._group.create_task(self._guarded(work, name, task, hook), name=task)
+        made = self._group.create_task(self._guarded(work, name, task, hook), name=task)
+        # a task cancelled before it ran (the scope closing) never started ``work``: close
+        # it, or Python warns that it was never awaited (a no-op for work that ran)
+        made.add_done_callback(lambda _: work.close())
+        return made
 
     async def _guarded(
         self,

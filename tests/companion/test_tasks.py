@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import asyncio
+import inspect
 import logging
 
 import pytest
@@ -80,3 +81,26 @@ def test_a_lone_task_that_fails_is_logged(caplog: pytest.LogCaptureFixture) -> N
     with caplog.at_level(logging.ERROR, logger="probe"):
         asyncio.run(main())
     assert len(seen) == 1 and any("lone" in r.getMessage() for r in caplog.records)
+
+
+def test_work_whose_task_never_ran_is_closed_not_left_unawaited() -> None:
+    """A task cancelled before its first turn (its scope closing) never starts its work:
+    the work is closed, not left for Python to warn "coroutine ... was never awaited" (seen
+    in a CI run)."""
+
+    async def work() -> None:
+        await asyncio.sleep(3600)
+
+    async def main() -> tuple[bool, str]:
+        scope = TaskScope("closing", logging.getLogger("closing"))
+        await scope.open()
+        late = work()
+        task = scope.spawn(late, "late")
+        task.cancel()  # before it had a turn
+        await asyncio.sleep(0.01)
+        state = inspect.getcoroutinestate(late)
+        await scope.close()
+        return task.cancelled(), state
+
+    cancelled, state = asyncio.run(main())
+    assert cancelled and state == inspect.CORO_CLOSED
