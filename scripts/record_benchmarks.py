@@ -25,9 +25,9 @@ import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from companion.sim.bench_link import bench_link, format_link
+from companion.sim.city import Band
 from protocol.geo.volumes import Separation
 from protocol.tools.bench import bench_crypto, format_crypto
 from protocol.tools.bench_paths import (
@@ -147,12 +147,10 @@ def fleet() -> str:
         city = run_city(spec)
         wall = time.perf_counter() - start
         r, hours = city.replay, city.drone_hours or float("inf")
-        runs = sum(len(d.runs) for d in r.drones)
-        sent = sum(d.bytes_sent for d in r.drones)
-        precautions = sum(len(d.precautionary) for d in r.drones)
         rows.append(
-            f"| {drones} | 1 | {city.drone_hours:.1f} | {'yes' if city.finished else 'no'} "
-            f"| {runs / hours:.1f} | {sent / 1000 / hours:.0f} | {precautions / hours:.2f} "
+            f"| {drones} | 1 | {city.drone_hours:.1f} | {'yes' if r.finished else 'no'} "
+            f"| {city.runs / hours:.1f} | {city.bytes_sent / 1000 / hours:.0f} "
+            f"| {city.precautions / hours:.2f} "
             f"| {r.conflicts} | {r.conflicts_resolved} | {r.false_alarms} | {r.made_worse} "
             f"| {wall:.0f} |"
         )
@@ -169,16 +167,15 @@ def fleet() -> str:
     return intro + "\n\n" + "\n".join(rows) + "\n\n" + "\n\n".join(tables)
 
 
-def _bands(bands: list[Any]) -> str:
+def _bands(bands: list[Band]) -> str:
     lines = [
         "| in range | drones | drone-h | runs / h | KB / h | channel load | precautions / h "
         "| conflicts | resolved | false alarms |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for b in bands:
-        span = f"{b.low}-{b.high}" if b.high < 1000 else f"{b.low}+"
         lines.append(
-            f"| {span} | {b.drones} | {b.drone_hours:.2f} | {b.runs:.1f} | {b.kbytes:.0f} "
+            f"| {b.span} | {b.drones} | {b.drone_hours:.2f} | {b.runs:.1f} | {b.kbytes:.0f} "
             f"| {b.load:.2f} | {b.precautions:.2f} | {b.conflicts} | {b.resolved} "
             f"| {b.false_alarms} |"
         )
@@ -186,6 +183,7 @@ def _bands(bands: list[Any]) -> str:
 
 
 BUSY = ("busy_six", "busy_ten", "busy_four_eu868")
+EDIT_FAILED = ("plan_failed", "upload_failed")  # (a failed run is not a failed edit)
 
 
 def busy() -> str:
@@ -208,7 +206,7 @@ def busy() -> str:
     for name in BUSY:
         print(f"  ... replay {name} --virtual", file=sys.stderr, flush=True)
         r = run_virtual(load_scenario(SCENARIOS / f"{name}.toml")).report
-        failed = sum(len(d.failures) for d in r.drones)
+        failed = sum(f["kind"] in EDIT_FAILED for d in r.drones for f in d.failures)
         lines.append(
             f"| {name} | {r.link.profile}, {r.link.loss:.0%} loss "
             f"| {r.conflicts_resolved}/{r.conflicts} | {r.precautionary_actions} "

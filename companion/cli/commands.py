@@ -283,7 +283,7 @@ def fleet(args: argparse.Namespace) -> int:
     if args.out:
         cli.write_atomic(args.out, json.dumps(city.replay.to_json(), indent=2) + "\n")
     print(json.dumps(city_json(city), indent=2) if args.json else format_city(city))
-    return cli.EXIT_OK if city.finished else cli.EXIT_NEGATIVE
+    return cli.EXIT_OK if city.replay.finished else cli.EXIT_NEGATIVE
 
 
 def compare(args: argparse.Namespace) -> int:

@@ -24,8 +24,8 @@ class LinkConfig:
     latency_allowance_s: float = 0.05
     idle_timeout_s: float | None = None  # None: derived from the profile
     # channels of the region used (at most the profile's): 1, everything on the one channel;
-    # more, beacons and each session's first message on channel 0, the rest of a session on
-    # a channel of its own (1..channels-1, from its peers and id)
+    # more, beacons and each session's call on channel 0, the rest of a session on its
+    # responder's channel (1..channels-1, from the responder's node id)
     channels: int = 1
 
     def idle_timeout(self, profile: LinkProfile) -> float:
@@ -58,3 +58,7 @@ class Session:
     probes: int = 0
     ours: bool = False  # we opened it
     accepted: bool = True  # handed to ``accept`` (a call waits for its first message)
+
+    def hears_on(self) -> int:
+        """Where the radio listens for it: its channel once moved, else its last probe's."""
+        return self.channel if self.moved else self.listen_on

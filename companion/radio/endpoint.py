@@ -178,17 +178,18 @@ class LinkEndpoint:
         """Forget a session: its buffers are freed, late frames are ignored."""
         sess = self._sessions.pop((peer, session), None)
         self._closed[(peer, session)] = self.clock.now()
-        if sess is not None and sess.moved and sess.channel:
-            self._closed_on[(peer, session)] = sess.channel
+        own = sess.channel if sess is not None and sess.moved else 0
+        if own:
+            self._closed_on[(peer, session)] = own
         self.receiver.forget_session(peer, session)
         self.receiver.untrust(peer, session)
         if self._active == (peer, session):
             self._active = None
-            if sess is not None and sess.moved and sess.channel and sess.accepted:
+            if own and sess is not None and sess.accepted:
                 # its peer may not have our last ACK: listen there a little longer (and
                 # answer its polls), as TCP's TIME-WAIT does
                 grace = GRACE_RTOS * self._timer(peer).rto
-                self._grace = (sess.channel, self.clock.now() + grace)
+                self._grace = (own, self.clock.now() + grace)
                 self.clock.call_later(grace + 1e-3, self.radio.retune)
             self.radio.retune()
 
@@ -429,8 +430,7 @@ class LinkEndpoint:
                 self._listen_for(sess)
 
     def _listen_for(self, sess: Session) -> None:
-        if self._active != (sess.peer, sess.session):
-            self._active = (sess.peer, sess.session)
+        self._active = (sess.peer, sess.session)
         self.radio.retune()
 
     def _settled(self, sess: Session) -> bool:
@@ -444,7 +444,7 @@ class LinkEndpoint:
         """Where to ask for an ACK: the session's channel once moved; before, its first
         message's ACK may have been lost after the peer moved on, so every other probe goes
         to the session's channel (and the radio listens where the probe went)."""
-        if sess.moved or self.channels == 1:
+        if self._settled(sess):
             return self._data_channel(sess)
         sess.probes += 1
         sess.listen_on = sess.channel if sess.probes % 2 == 0 else 0
@@ -455,13 +455,9 @@ class LinkEndpoint:
         """Where our ACKs and ABORTs of a session go: its channel once it moved, else the
         common one (a first message is answered where it came)."""
         sess = self._sessions.get(key)
-        if sess is None:  # a session just closed answers where it was
-            return self._heard_on(key) if key in self._closed else 0
+        if sess is None:  # a session just closed answers where it was (its peer may still be)
+            return self._closed_on.get(key, 0)
         return self._data_channel(sess)
-
-    def _heard_on(self, key: tuple[int, int]) -> int:
-        """A closed session's channel, as its peer may still use it."""
-        return self._closed_on.get(key, 0)
 
     def _listening(self) -> int:
         """Where the radio listens between frames: the active session's channel (or, before
@@ -469,10 +465,10 @@ class LinkEndpoint:
         common channel."""
         sess = self._sessions.get(self._active) if self._active else None
         if sess is not None and not sess.lingering:
-            return sess.channel if sess.moved else sess.listen_on
+            return sess.hears_on()
         for other in self._sessions.values():
             if not other.lingering and (other.moved or other.ours):
-                return other.channel if other.moved else other.listen_on
+                return other.hears_on()
         channel, until = self._grace
         return channel if self.clock.now() < until else 0
 
@@ -510,7 +506,7 @@ class LinkEndpoint:
         self.receiver.touch(frame.src, frame.session, now)
         if frame.type in (FrameType.DATA, FrameType.POLL) and key in self._aborted:
             if frame.type is FrameType.POLL or frame.flags & Flag.ACK_REQ:
-                self._enqueue(self._aborted[key], control=True, channel=self._heard_on(key))
+                self._enqueue(self._aborted[key], control=True, channel=self._reply_channel(key))
         elif frame.type in (FrameType.DATA, FrameType.POLL):
             delivered, ack = self.receiver.on_frame(frame, now)
             if ack is not None:

@@ -147,8 +147,7 @@ class Transmitter:
             self.stats.frames_sent += 1
             self.stats.bytes_sent += len(item.data)
             self.stats.airtime_s += item.airtime
-            if self._tune is not None:
-                self._tune(self.listen())
+            self.retune()
             if not item.done.done():
                 item.done.set_result(self.clock.now())
             await self.clock.sleep(self.profile.turnaround_s)

@@ -161,12 +161,12 @@ class AliceRuns:
         # Several channels: a peer in a run elsewhere does not hear us (nor beacons): one
         # heard lately on the common channel goes first
         lately = now - IDLE_BEACONS * self.settings.beacon_interval_s
-        elsewhere = (lambda p: p.heard_at < lately) if self.endpoint.channels > 1 else None
+        channels = self.endpoint.channels > 1
         return min(
             ready,
             key=lambda p: (
                 p.plan[0][0] is not Phase.NEAR,
-                elsewhere is not None and elsewhere(p),
+                channels and p.heard_at < lately,
                 urgency(p),
             ),
         )

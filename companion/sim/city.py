@@ -128,9 +128,13 @@ class Band:
     kbytes: float  # sent, per drone-hour
     load: float  # airtime on the channel within range, seconds per second (>1: overload)
     precautions: float  # per drone-hour
-    conflicts: int  # pairs inside each other's protected volume without the companions
-    resolved: int
+    conflicts: int  # pairs with a drone in the band inside each other's protected volume
+    resolved: int  # without the companions; of those, resolved; false alarms, the same way
     false_alarms: int
+
+    @property
+    def span(self) -> str:
+        return f"{self.low}-{self.high}" if self.high < BANDS[-1][1] else f"{self.low}+"
 
 
 @dataclass(frozen=True)
@@ -141,7 +145,19 @@ class CityReport:
     in_range: dict[int, float]  # drone -> mean airborne drones within radio range
     load: dict[int, float]  # drone -> channel load around it while airborne
     bands: list[Band]
-    finished: bool
+
+    @property
+    def runs(self) -> int:
+        """Runs that gave a result, all drones together."""
+        return sum(len(d.runs) for d in self.replay.drones)
+
+    @property
+    def bytes_sent(self) -> int:
+        return sum(d.bytes_sent for d in self.replay.drones)
+
+    @property
+    def precautions(self) -> int:
+        return sum(len(d.precautionary) for d in self.replay.drones)
 
 
 def _airborne(track: Track, home_amsl: float) -> list[tuple[float, float, float, float]]:
@@ -197,10 +213,8 @@ def summarise(
 ) -> CityReport:
     """Per drone-hour figures and the drones-in-range table of a flown city."""
     report = replay.report
-    homes = {d.id: d for d in report.drones}
-    flown = {
-        k: _airborne(track, HOME_AMSL) for k, track in replay.tracks.flown.items() if k in homes
-    }
+    ids = {d.id for d in report.drones}
+    flown = {k: _airborne(track, HOME_AMSL) for k, track in replay.tracks.flown.items() if k in ids}
     airborne_s = {k: (v[-1][0] - v[0][0]) if len(v) > 1 else 0.0 for k, v in flown.items()}
     range_m = spec.range_km * 1000.0
     in_range, grid = _neighbours(flown, range_m)
@@ -236,7 +250,6 @@ def summarise(
         in_range,
         load,
         bands,
-        report.finished,
     )
 
 
@@ -252,27 +265,23 @@ def format_city(city: CityReport) -> str:
     """The fleet simulation's summary and its drones-in-range table."""
     spec, r = city.spec, city.replay
     hours = city.drone_hours or math.inf
-    total_runs = sum(len(d.runs) for d in r.drones)
-    total_bytes = sum(d.bytes_sent for d in r.drones)
-    precautions = sum(len(d.precautionary) for d in r.drones)
     lines = [
         f"Fleet simulation {r.scenario}: {spec.drones} drones over {spec.area_km:g} km x "
         f"{spec.area_km:g} km for {spec.hours:g} h, radio range {spec.range_km:g} km, "
         f"{spec.profile} at {spec.loss:.0%} loss, in virtual time",
         f"  {city.drone_hours:.1f} drone-hours airborne; all missions flown: "
-        f"{'yes' if city.finished else 'NO'}",
-        f"  per drone-hour: {total_runs / hours:.1f} runs, {total_bytes / 1000 / hours:.1f} KB "
-        f"sent, {precautions / hours:.2f} precautions",
+        f"{'yes' if r.finished else 'NO'}",
+        f"  per drone-hour: {city.runs / hours:.1f} runs, {city.bytes_sent / 1000 / hours:.1f} "
+        f"KB sent, {city.precautions / hours:.2f} precautions",
         f"  conflicts {r.conflicts}, resolved {r.conflicts_resolved}, false alarms "
-        f"{r.false_alarms}, made worse {r.made_worse}, precautions {precautions}",
+        f"{r.false_alarms}, made worse {r.made_worse}, precautions {city.precautions}",
         "",
         "  in range  drones  drone-h  runs/h  KB/h  load  precautions/h  conflicts  resolved  "
         "false alarms",
     ]
     for b in city.bands:
-        span = f"{b.low}-{b.high}" if b.high < 1_000 else f"{b.low}+"
         lines.append(
-            f"  {span:>8}  {b.drones:>6}  {b.drone_hours:>7.2f}  {b.runs:>6.1f}  {b.kbytes:>4.0f}"
+            f"  {b.span:>8}  {b.drones:>6}  {b.drone_hours:>7.2f}  {b.runs:>6.1f}  {b.kbytes:>4.0f}"
             f"  {b.load:>4.2f}  {b.precautions:>13.2f}  {b.conflicts:>9}  {b.resolved:>8}  "
             f"{b.false_alarms:>12}"
         )
@@ -284,11 +293,11 @@ def city_json(city: CityReport) -> dict[str, object]:
     r = city.replay
     return {
         "spec": asdict(city.spec),
-        "finished": city.finished,
+        "finished": r.finished,
         "drone_hours": city.drone_hours,
-        "runs": sum(len(d.runs) for d in r.drones),
-        "bytes_sent": sum(d.bytes_sent for d in r.drones),
-        "precautions": sum(len(d.precautionary) for d in r.drones),
+        "runs": city.runs,
+        "bytes_sent": city.bytes_sent,
+        "precautions": city.precautions,
         "conflicts": r.conflicts,
         "conflicts_resolved": r.conflicts_resolved,
         "false_alarms": r.false_alarms,

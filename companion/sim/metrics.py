@@ -33,7 +33,7 @@ from companion.sim.report import (
 )
 from companion.sim.scenario import DroneSpec, Scenario
 from companion.sim.vehicles import ReplayVehicle, Track
-from protocol.geo.geodesy import ground_offset
+from protocol.geo.geodesy import ground_offset, metres_per_degree
 from protocol.geo.geometry import Point, path_hits
 from protocol.geo.grid import GridSpec
 from protocol.geo.volumes import Route, Separation, route_hits
@@ -125,9 +125,7 @@ class Screen:
 
     def __init__(self, ref: tuple[float, float]) -> None:
         self.ref = ref
-        # metres per degree north and east at ``ref``, on the project's Earth model
-        self._north = ground_offset(ref[0], ref[1], ref[0] + 0.01, ref[1])[0] / 0.01
-        self._east = ground_offset(ref[0], ref[1], ref[0], ref[1] + 0.01)[1] / 0.01
+        self._north, self._east = metres_per_degree(ref[0])  # the project's Earth model
         self._seconds: dict[int, tuple[Track, dict[int, tuple[float, float, float]]]] = {}
 
     def _of(self, track: Track) -> dict[int, tuple[float, float, float]]:

@@ -50,6 +50,7 @@ from companion.sim.scenario import DroneSpec, Scenario, ScenarioError
 from companion.sim.vehicles import MockVehicle, Px4SitlVehicle, ReplayVehicle, Track
 from companion.sim.virtual_time import VirtualTimeLoop, run_simulated
 from companion.tasks import spawn
+from protocol.geo.geodesy import metres_per_degree
 
 log = logging.getLogger(__name__)
 # SIH lock-step speed factor for two PX4 vehicles, their companions and the protocol on 2
@@ -164,12 +165,11 @@ def _fly_offline(scenario: Scenario) -> dict[int, list[tuple[float, float, float
                     mock.pause()
                 elif at + length <= t < at + length + dt:
                     mock.resume()
+            behind = t + dt - mock.craft.t
             if not sparse:
                 mock.advance(dt)
-            elif mock.mission_running or mock.holding or mock.flying:
-                mock.advance(t + dt - mock.craft.t)
-            elif t + dt - mock.craft.t >= 1.0 - 1e-9:
-                mock.advance(t + dt - mock.craft.t)
+            elif mock.mission_running or mock.holding or mock.flying or behind >= 1.0 - 1e-9:
+                mock.advance(behind)
         t += dt
         if len(started) == len(mocks) and not any(
             m.mission_running or m.holding for m in mocks.values()
@@ -395,16 +395,21 @@ def _radio(
     of each other where the vehicles are, when it has a radio range)."""
     channel = Channel(Impairments(loss=scenario.loss), scenario.seed)
     if scenario.radio_range_m is not None:
-        channel.reach = _in_range(scenario.radio_range_m, clock, vehicles)
+        home = scenario.drones[0].home
+        channel.reach = _in_range(scenario.radio_range_m, (home[0], home[1]), clock, vehicles)
     return SimMedium(channel, clock), profile(scenario.link_profile)
 
 
 def _in_range(
-    range_m: float, clock: Clock, vehicles: dict[int, ReplayVehicle]
+    range_m: float,
+    ref: tuple[float, float],
+    clock: Clock,
+    vehicles: dict[int, ReplayVehicle],
 ) -> Callable[[int, int], bool]:
     """reach(a, b): the vehicles of nodes a and b (their last track points) are at most
-    ``range_m`` apart on the ground; positions are looked up once per instant."""
-    k = math.pi / 180.0 * 6_371_000.0
+    ``range_m`` apart on the ground (a flat projection about ``ref``: a radio range is not
+    known to the metre); positions are looked up once per instant."""
+    north, east = metres_per_degree(ref[0])
     limit = range_m * range_m
     seen: dict[int, tuple[float, float]] = {}
     instant = [math.nan]
@@ -417,8 +422,8 @@ def _in_range(
         point = seen.get(node)
         if point is None:
             track = vehicles[node].trajectory
-            lat, lon = (track[-1][1], track[-1][2]) if track else (0.0, 0.0)
-            point = seen[node] = (lat * k, lon * k * math.cos(math.radians(lat)))
+            lat, lon = (track[-1][1], track[-1][2]) if track else ref
+            point = seen[node] = (lat * north, lon * east)
         return point
 
     def reach(a: int, b: int) -> bool:

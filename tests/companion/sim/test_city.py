@@ -90,7 +90,7 @@ def test_a_city_is_the_same_sky_for_the_same_seed() -> None:
 def test_a_small_city_flies_and_is_summed_up() -> None:
     spec = CitySpec(drones=5, hours=0.15, area_km=2.0, range_km=1.5, seed=2)
     city = run_city(spec)
-    assert city.finished  # every mission flown
+    assert city.replay.finished  # every mission flown
     report = city.replay
     assert len(report.drones) == 5 and len(report.pairs) == 10
     # each drone's radio was on, and off once landed: it sent beacons, and it heard the
