@@ -232,7 +232,18 @@ class Neighbourhood:
         return max(self.peer_speed(peer), self.settings.cruise_m_s)
 
     def urgency(self, peer: Peer) -> float:
-        """Seconds until the peer could be here at the worst (:func:`time_to_meet`)."""
+        """Seconds until the peer could be here (:func:`time_to_meet`: at the measured rate
+        our distance shrinks, where fresh; else flying straight at us)."""
+        return self._meet(peer, measured=True)
+
+    def earliest(self, peer: Peer) -> float:
+        """Seconds until the peer could be here even if it turned straight at us now: a
+        bound, not an expectation -- the measured closing rate left out, and the peer as
+        much closer as it could have flown since its last beacon (at SF12 beacons are
+        minutes apart)."""
+        return self._meet(peer, measured=False, silent_after_s=0.0)
+
+    def _meet(self, peer: Peer, *, measured: bool, silent_after_s: float | None = None) -> float:
         return time_to_meet(
             self.vehicle.position[:2],
             self.vehicle.speed_m_s,
@@ -240,7 +251,8 @@ class Neighbourhood:
             floor_m_s=self.settings.failsafe.floor_m_s,
             peer_floor_m_s=self.peer_speed(peer),
             now=self.ctx.clock.now(),
-            silent_after_s=self.cadence.silence_s,
+            silent_after_s=self.cadence.silence_s if silent_after_s is None else silent_after_s,
+            measured=measured,
         )
 
     def forget(self, node: int) -> None:

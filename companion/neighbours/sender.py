@@ -153,10 +153,13 @@ class BeaconSender:
         """Beacon every interval (random phase and jitter: drones that beacon in lockstep
         collide on every beacon), and at once when announced -- on a duty-cycled link the
         interval is minutes, discovery must not wait for it.  ``busy``: a run is on the air
-        (a beacon would only collide with its frames; deferred up to three times);
+        (a beacon now would only collide with its frames): it is looked at again a moment
+        later, for up to half an interval -- in a busy sky the channel is never free, and a
+        beacon deferred by whole intervals left peers unheard for 40 s, which the fail-safe
+        must take as flying straight at us (the link sends beacons ahead of run data);
         ``content`` None: no position from the autopilot yet (beacon once there is one)."""
         wait = _JITTER.uniform(0, self.cadence.interval_s)
-        deferred = 0
+        deferred = 0.0
         while True:
             with contextlib.suppress(TimeoutError):
                 await self.clock.wait_for(self._now.wait(), wait)
@@ -164,15 +167,16 @@ class BeaconSender:
             if urgent:
                 self._now.clear()
                 await self.clock.sleep(_JITTER.uniform(0.0, 1.0))  # do not answer in chorus
-            if busy() and not urgent and deferred < 3:
-                deferred += 1
-            else:
-                own = content()
-                if own is None:
-                    wait = 1.0  # (on a duty-cycled link the interval would lose minutes)
-                    continue
-                deferred = 0
-                await self._send(*self._position(own))
+            if busy() and not urgent and deferred < self.cadence.interval_s / 2:
+                wait = min(_JITTER.uniform(0.5, 1.5), self.cadence.interval_s / 4)
+                deferred += wait
+                continue
+            own = content()
+            if own is None:
+                wait = 1.0  # (on a duty-cycled link the interval would lose minutes)
+                continue
+            deferred = 0.0
+            await self._send(*self._position(own))
             wait = self.cadence.interval_s * _JITTER.uniform(0.7, 1.3)
 
     # ------------------------------------------------------------------ inside

@@ -50,6 +50,8 @@ from companion.tasks import TaskScope
 
 log = logging.getLogger("companion.radio")
 CALL = b"\x00"  # several channels: a session's first message, on the common channel
+ENGAGED_CYCLES = 16  # a node heard in another pair's session is engaged this long after
+# (busy_ten, BUSY refusals per replay: 22 with 2 cycles, 12 with 8, 6 with 20)
 CALL_WAIT_S = 15.0  # a call not followed by a message this soon is forgotten
 GRACE_RTOS = 4.0  # a session closed on its own channel is listened to this many RTOs more
 FIRST_POLLS = 4  # several channels: a first message unanswered after this many probes fails
@@ -107,6 +109,9 @@ class LinkEndpoint:
         self._timers: dict[int, RetransmissionTimer] = {}
         self._tasks = TaskScope(f"link-{node}", log)  # the transmitter, upkeep, lingering runs
         self._last_traffic = -math.inf
+        self._others_at = -math.inf  # another pair's session frame was last heard then
+        self._engaged: dict[int, float] = {}  # node -> when it was last heard in another
+        # pair's session (the frame headers' src and dst are in the clear)
         self._beacon_seq = secrets.randbelow(256)
         self._beacon_parts = BeaconParts(self.stats)
 
@@ -247,6 +252,26 @@ class LinkEndpoint:
             or self.clock.now() - self._last_traffic < quiet_s
         )
 
+    def engaged(self, node: int) -> bool:
+        """``node`` was heard in another pair's session lately (within
+        :data:`ENGAGED_CYCLES` frame-ACK cycles, about 8 s on SF7: a run leaves gaps between
+        its messages -- a drone that sent its request waits for the reply): a request now
+        would likely be refused BUSY or go unheard.  From public frame headers, which a
+        stranger can forge: callers bound how long they defer to it."""
+        return self.clock.now() - self._engaged.get(node, -math.inf) < ENGAGED_CYCLES * self.cycle_s
+
+    def others_quiet_s(self) -> float:
+        """Seconds since a frame of another pair's session was heard (on our channel)."""
+        return self.clock.now() - self._others_at
+
+    @property
+    def cycle_s(self) -> float:
+        """A frame, its ACK and two turnarounds: what the retransmission timer waits at least."""
+        p = self.profile
+        ack = p.airtime(OVERHEAD + 2 + MAX_ACK_BITMAP)
+        turnarounds = 2 * (p.turnaround_s + self.config.latency_allowance_s)
+        return p.airtime(self.frame_size) + ack + turnarounds
+
     def budget_wait(self) -> float:
         """Seconds the next queued frame must still wait for the duty-cycle budget (0: none
         waits, or nothing is queued)."""
@@ -376,7 +401,7 @@ class LinkEndpoint:
         are small (US915 SF9), which a receiver puts together or drops whole."""
         seq, self._beacon_seq = self._beacon_seq, (self._beacon_seq + 1) & 0xFF
         frames = beacon_frames(self.node, seq, payload, self.payload_size)
-        done = [self._enqueue(frame, control=False) for frame in frames]
+        done = [self.radio.enqueue(f.encode(), control=False, beacon=True) for f in frames]
         for sent in done:
             await sent
 
@@ -392,13 +417,8 @@ class LinkEndpoint:
         timer = self._timers.get(peer)
         if timer is None:
             p = self.profile
-            ack = p.airtime(OVERHEAD + 2 + MAX_ACK_BITMAP)
             # The peer may still be sending one frame, then turns around and acknowledges.
-            model = (
-                p.airtime(self.frame_size)
-                + ack
-                + 2 * (p.turnaround_s + self.config.latency_allowance_s)
-            )
+            model = self.cycle_s
             # A peer that spent its duty-cycle budget may stay silent for up to a window: the
             # backoff must let 20 probes outlast that.  Elsewhere silence means trouble.
             limit = p.duty_window_s / 8 if p.duty_cycle else 30 * model
@@ -483,6 +503,8 @@ class LinkEndpoint:
                 del self._closed[key]
                 self._aborted.pop(key, None)
                 self._closed_on.pop(key, None)
+            for node in [n for n, t in self._engaged.items() if now - t > self.idle_timeout]:
+                del self._engaged[node]
 
     def _on_bytes(self, data: bytes) -> None:
         try:
@@ -494,6 +516,8 @@ class LinkEndpoint:
         if frame.type is not FrameType.BEACON:
             self._last_traffic = now  # a run on the air, ours or another pair's
         if frame.dst not in (self.node, BROADCAST):
+            self._engaged[frame.src] = self._engaged[frame.dst] = now
+            self._others_at = now
             return  # overheard: another pair's traffic
         self.stats.frames_received += 1
         self.stats.bytes_received += len(data)

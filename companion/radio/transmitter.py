@@ -1,6 +1,9 @@
 """One radio's transmit queue, within its regulation.
 
-Control frames (ACK, POLL, ABORT) go before data; every frame waits for the duty-cycle budget
+Control frames (ACK, POLL, ABORT) go first, then beacons, then data: a beacon queued behind a
+run's burst of 64 frames went out 20 s late on SF7, and in a busy sky peers went unheard for
+a minute -- the fail-safe then assumes they flew straight at us all that time (busy_ten: every
+precaution of the first minute).  Every frame waits for the duty-cycle budget
 (:class:`~companion.radio.airtime.DutyCycle`, data leaving a reserve for control), listens
 before talking where the transport can sense the channel (LoRa channel activity detection),
 and frames are spaced by the radio's turnaround time.  The endpoint
@@ -58,6 +61,7 @@ class Transmitter:
         self.running = False
         self.error: LinkError | None = None  # why it stopped for good (its task died)
         self._control: deque[_TxItem] = deque()
+        self._beacons: deque[_TxItem] = deque()  # data frames that go before a run's
         self._data: deque[_TxItem] = deque()
         self._wake = asyncio.Event()
         # where the radio listens between frames (several channels: the endpoint's choice)
@@ -70,20 +74,27 @@ class Transmitter:
         if self._tune is not None and not self._sending:
             self._tune(self.listen())
 
-    def enqueue(self, data: bytes, *, control: bool, channel: int = 0) -> asyncio.Future[float]:
-        """Queue one encoded frame (to go on ``channel`` of the region); the future gives
-        the link time it finished leaving."""
+    def enqueue(
+        self, data: bytes, *, control: bool, channel: int = 0, beacon: bool = False
+    ) -> asyncio.Future[float]:
+        """Queue one encoded frame (to go on ``channel`` of the region; ``beacon``: ahead of
+        other data, spending the data budget); the future gives the link time it finished
+        leaving."""
         if not self.running:
             raise self.error or LinkError("link endpoint is not running")
         done: asyncio.Future[float] = asyncio.get_running_loop().create_future()
         item = _TxItem(data, self.profile.airtime(len(data)), control, done, channel)
-        (self._control if control else self._data).append(item)
+        (self._control if control else self._beacons if beacon else self._data).append(item)
         self._wake.set()
         return done
 
+    def _queue(self) -> deque[_TxItem]:
+        """The queue whose head goes next."""
+        return self._control or self._beacons or self._data
+
     def budget_wait(self) -> float:
         """Seconds the frame at the head of the queue must wait for the duty-cycle budget."""
-        queue = self._control if self._control else self._data
+        queue = self._queue()
         if not queue:
             return 0.0
         now = self.clock.now()
@@ -92,11 +103,12 @@ class Transmitter:
 
     def fail_pending(self, error: LinkError) -> None:
         """The endpoint closes: a sender waiting on a queued frame gets ``error``."""
-        for item in (*self._control, *self._data):
+        for item in (*self._control, *self._beacons, *self._data):
             if not item.done.done():  # a sender waiting on it gets the error, nobody else
                 item.done.set_exception(error)
                 item.done.add_done_callback(_consume)
         self._control.clear()
+        self._beacons.clear()
         self._data.clear()
 
     def stop(self, error: LinkError) -> None:
@@ -110,7 +122,7 @@ class Transmitter:
         deferred_since: float | None = None
         patience = max(MAX_DEFER_S, 3 * self.profile.airtime(self.profile.max_frame))
         while True:
-            queue = self._control if self._control else self._data
+            queue = self._queue()
             if not queue:
                 self._wake.clear()
                 await self._wake.wait()

@@ -35,7 +35,7 @@ from companion.runs.budget import ALICE, MAX_RUN_WORK, BudgetExceeded, RunLedger
 from companion.runs.edits import Edits
 from companion.runs.estimates import RunEstimates
 from companion.runs.exchange import PeerRefused, RunReport, run_alice
-from companion.runs.failsafe import too_late
+from companion.runs.failsafe import act_now, too_late
 from companion.runs.guard import Guard
 from companion.runs.progress import RunProgress
 from companion.runs.standing import Standing
@@ -58,6 +58,11 @@ BOB_GUESS = 4  # Bob's size before he tells it: a remaining route of a few legs 
 QUIET_S = 5.0  # no session traffic heard this long: the channel is free for a full run
 GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet channel
 IDLE_BEACONS = 2.0  # several channels: a peer heard within this many beacon intervals is idle
+QUIET_CYCLES = (2.0, 6.0)  # in flight on one channel, a new run waits for a random quiet of
+# this many frame-ACK cycles after other pairs' run traffic (about 1-3 s on SF7)
+PRESS_S = 20.0  # ... unless a run with its peer started this much later would come too late
+ENGAGED_DEFER_S = 60.0  # a peer heard in other pairs' runs is asked anyway after this long:
+# frame headers are anybody's to forge, and a stranger must not keep our runs off for good
 
 
 class AliceRuns:
@@ -95,6 +100,8 @@ class AliceRuns:
         self.air = air
         self.ledger = ledger
         self._busy = asyncio.Lock()  # a comparison of ours is under way
+        self._deferred: dict[int, float] = {}  # peer -> since when it is heard in other runs
+        self._quiet_need: float | None = None  # the quiet our next run waits for (drawn)
         self._wake = asyncio.Event()
         self._ground_wait: float | None = None  # since when a run waits for a quiet channel
 
@@ -145,6 +152,8 @@ class AliceRuns:
         # A full run after a near run waits until it is needed (or the channel is quiet):
         # meanwhile the radio serves every drone's near runs.
         quiet = not self.endpoint.busy(QUIET_S) and not self.air.turns.waiting()
+        # (its deferrals counted from now on, alongside the ground's wait: they do not add up)
+        engaged = {p.node for p in due if self._engaged(p, now)}
         if self.vehicle.on_ground and not quiet:
             # Before take-off nothing is urgent, and a run started while other drones'
             # run is on the air slows theirs (in flight, perhaps past their deadline):
@@ -154,10 +163,17 @@ class AliceRuns:
             if now - self._ground_wait < GROUND_WAIT_S:
                 return None
         self._ground_wait = None
-        ready = [p for p in due if p.plan[0][0] is Phase.NEAR or p.full_after <= now or quiet]
+        ready = [
+            p
+            for p in due
+            if (p.plan[0][0] is Phase.NEAR or p.full_after <= now or quiet)
+            and p.node not in engaged
+        ]
         if not ready:
             return None
         urgency = self.neighbourhood.urgency
+        if not self._channel_ours(min(ready, key=urgency)):
+            return None
         # Several channels: a peer in a run elsewhere does not hear us (nor beacons): one
         # heard lately on the common channel goes first
         lately = now - IDLE_BEACONS * self.settings.beacon_interval_s
@@ -170,6 +186,35 @@ class AliceRuns:
                 urgency(p),
             ),
         )
+
+    def _channel_ours(self, peer: Peer) -> bool:
+        """In flight on one channel, a run starts once other pairs' runs have left the
+        channel quiet for a random few frame cycles: runs started together share its airtime
+        and collide, and all come late (busy_ten: nine hellos in the first 28 s, the first
+        result at 380 s); one at a time each is as quick as alone, and the random wait keeps
+        the drones that waited from all starting together again.  A run with ``peer`` that
+        would come too late if it waited longer (:data:`PRESS_S`) does not wait."""
+        if self.endpoint.channels > 1 or self.vehicle.on_ground:
+            return True  # (on the ground: the quiet channel of _next)
+        if self._quiet_need is None:
+            low, high = QUIET_CYCLES
+            draw = low + (high - low) * secrets.randbelow(1 << 16) / (1 << 16)
+            self._quiet_need = draw * self.endpoint.cycle_s
+        if self.endpoint.others_quiet_s() < self._quiet_need and not self.guard.pressing(
+            peer, PRESS_S
+        ):
+            return False
+        self._quiet_need = None
+        return True
+
+    def _engaged(self, peer: Peer, now: float) -> bool:
+        """The peer is in another pair's run on the air: a request now would be refused BUSY
+        (or go unheard) after its whole hello -- in a busy sky most requests were (busy_ten:
+        47 of 55).  Deferred to for :data:`ENGAGED_DEFER_S` at most."""
+        if not self.endpoint.engaged(peer.node):
+            self._deferred.pop(peer.node, None)
+            return False
+        return now - self._deferred.setdefault(peer.node, now) < ENGAGED_DEFER_S
 
     async def _turn(self, peer: Peer, phase: Phase, horizon: int) -> bool:
         """The run, once the radio is ours; a bug in it is recorded, never fatal."""
@@ -604,7 +649,7 @@ class AliceRuns:
         )
         if phase is Phase.NEAR:
             peer.near_run = (self.clock.now(), horizon)
-        if too_late(needed, meet, self.settings.failsafe):
+        if act_now(needed, meet, self.neighbourhood.earliest(peer), self.settings.failsafe):
             await self.guard.precaution(peer, needed, meet)
         return alice, needed
 

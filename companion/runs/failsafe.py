@@ -42,6 +42,10 @@ class Action(enum.Enum):
 class FailsafeSettings:
     action: Action = Action.CLIMB
     margin_s: float = 10.0  # on top of the estimate: edit upload, climb, slack
+    # A late result is acted on no earlier than this (and the margin) before the peer could
+    # be here: a run may still end in the meantime, and a peer that never comes closer (a
+    # parallel track) needs nothing at all.  inf: at once, as soon as it is known late.
+    lead_s: float = 20.0
     loss: float = 0.1  # frame loss the estimate allows for
     floor_m_s: float = 5.0  # speed assumed at least for any drone (hover may turn to flight)
     # Closer than this counts as reached: the separation (15 m by default) and as much again
@@ -100,7 +104,30 @@ def run_seconds(
 
 
 def too_late(seconds_needed: float, seconds_to_meet: float, settings: FailsafeSettings) -> bool:
+    """A result ``seconds_needed`` from now comes too late for a peer that could be here in
+    ``seconds_to_meet`` (less the margin): what runs are planned by."""
     return seconds_to_meet <= seconds_needed + settings.margin_s
+
+
+def act_now(
+    seconds_needed: float,
+    seconds_to_meet: float,
+    earliest_s: float,
+    settings: FailsafeSettings,
+) -> bool:
+    """The precaution is due: the result comes too late for the peer's expected meeting
+    (:func:`too_late`, ``seconds_to_meet``: at the measured closing rate, where fresh) and
+    the peer could *at the earliest* (``earliest_s``: flying straight at us, never sooner)
+    be here within the lead and the margin -- the last check before it could.  Acting as
+    soon as a result is known late climbed for every neighbour on a parallel track 800 m away
+    whose run waited behind others (busy_ten: 10-13 false alarms a replay); waiting until
+    the last moment lets the run end meanwhile, and a peer that never comes closer never
+    gets that close.  The measured closing rate is no bound (two drones nearing a crossing
+    at a slant held it at 35 s while they closed in): the lead counts from the earliest."""
+    lead = min(seconds_needed, settings.lead_s)
+    return too_late(seconds_needed, seconds_to_meet, settings) and (
+        earliest_s <= lead + settings.margin_s
+    )
 
 
 def at_risk(

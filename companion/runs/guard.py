@@ -20,7 +20,7 @@ from companion.neighbours.peers import Peer
 from companion.radio.endpoint import LinkEndpoint
 from companion.runs.edits import Edits
 from companion.runs.estimates import RunEstimates
-from companion.runs.failsafe import at_risk, too_late
+from companion.runs.failsafe import act_now, at_risk, too_late
 from companion.runs.standing import Standing
 from protocol.geo.grid import GridSpec
 from protocol.intersection import Alice
@@ -81,8 +81,9 @@ class Guard:
             # Overdue (losses, a silent peer): the estimate has failed; expect as long again
             # as it has overrun, so the fail-safe does not wait for the last seconds.
             left = max(abs(deadline - clock.now()), 2.0) + self.endpoint.budget_wait()
-            if too_late(left, self.neighbourhood.urgency(peer), self.settings.failsafe):
-                await self.precaution(peer, left, self.neighbourhood.urgency(peer))
+            meet = self.neighbourhood.urgency(peer)
+            if act_now(left, meet, self.neighbourhood.earliest(peer), self.settings.failsafe):
+                await self.precaution(peer, left, meet)
                 return
 
     async def guard(self) -> None:
@@ -103,19 +104,36 @@ class Guard:
                     or not self.standing.pending(peer)
                 ):
                     continue
-                _, path = self.flight.remaining_path()
-                if len(path) < 2:
+                smallest = self.smallest_run_s(peer)
+                if smallest is None:
                     break
-                first = self.flight.near(path, 1)  # the least a run compares
-                needed = max(ends - now, 0.0) + self.estimates.seconds(
-                    DEFAULT_LIMITS.public_size(len(first) - 1),
-                    self.flight.grid(first),
-                    fresh=peer.node not in self.neighbourhood.holder_setups,
-                    n=1,
-                )
+                needed = max(ends - now, 0.0) + smallest
                 meet = self.neighbourhood.urgency(peer)
-                if too_late(needed, meet, self.settings.failsafe):
+                earliest = self.neighbourhood.earliest(peer)
+                if act_now(needed, meet, earliest, self.settings.failsafe):
                     await self.precaution(peer, needed, meet, waiting=True)
+
+    def smallest_run_s(self, peer: Peer) -> float | None:
+        """Link seconds the smallest run with ``peer`` would need, started now (None: no
+        path left to compare)."""
+        _, path = self.flight.remaining_path()
+        if len(path) < 2:
+            return None
+        first = self.flight.near(path, 1)  # the least a run compares
+        return self.estimates.seconds(
+            DEFAULT_LIMITS.public_size(len(first) - 1),
+            self.flight.grid(first),
+            fresh=peer.node not in self.neighbourhood.holder_setups,
+            n=1,
+        )
+
+    def pressing(self, peer: Peer, slack_s: float) -> bool:
+        """A run with ``peer`` that starts ``slack_s`` from now would come too late."""
+        smallest = self.smallest_run_s(peer)
+        if smallest is None:
+            return False
+        meet = self.neighbourhood.urgency(peer)
+        return too_late(smallest + slack_s, meet, self.settings.failsafe)
 
     async def precaution(
         self, peer: Peer, needed: float, meet: float, *, waiting: bool = False

@@ -27,7 +27,7 @@ from companion.radio import PROFILES
 from companion.radio.airtime import DutyCycle
 from companion.radio.clock import Clock
 from companion.radio.endpoint import LinkEndpoint
-from companion.runs.failsafe import FailsafeSettings, at_risk, run_seconds, too_late
+from companion.runs.failsafe import FailsafeSettings, act_now, at_risk, run_seconds, too_late
 from companion.runs.turns import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
 from companion.sim.fleet import make_fleet
 from companion.sim.medium import Impairments, SimMedium
@@ -337,9 +337,11 @@ def test_profiles() -> None:
     assert distance_m(north(0), north(1000)) == pytest.approx(1000.0, rel=0.001)
 
 
-def _guarded(busy_s: float, raised: bool = False) -> tuple[Companion, FakeAutopilot]:
-    """Drone 1 flies east towards the crossing at 0 m (425 m ahead); peer 2, 800 m south of
-    it, waits for its turn while the radio is busy with a run with peer 3 for ``busy_s``;
+def _guarded(
+    busy_s: float, raised: bool = False, south_m: float = 400.0
+) -> tuple[Companion, FakeAutopilot]:
+    """Drone 1 flies east towards the crossing at 0 m (425 m ahead); peer 2, ``south_m``
+    south of it, waits for its turn while the radio is busy with a run with peer 3 for ``busy_s``;
     ``raised``: a run already found the crossing leg (segment 1) in conflict with 2 and the
     drone flies it 15 m up.  Five seconds of the fail-safe's guard."""
     items, _ = read_plan(SCENARIOS / "inflight_east.plan")  # -600, -250, 250, 600 m east
@@ -354,7 +356,7 @@ def _guarded(busy_s: float, raised: bool = False) -> tuple[Companion, FakeAutopi
         )  # airborne, segment 0
         (lat, west), (_, east_) = c.flight.path.points[:2]  # -600 and -250 m: half-way, flying east
         c.vehicle.position = (lat, (west + east_) // 2, 518.0)
-        south = (C_LAT - round(800 / M_PER_E7_LAT), C_LON)
+        south = (C_LAT - round(south_m / M_PER_E7_LAT), C_LON)
         c.neighbourhood.peers[2] = Peer(
             2, beacon(south), heard_at=clock.now(), conflicts={1} if raised else set()
         )
@@ -369,14 +371,17 @@ def _guarded(busy_s: float, raised: bool = False) -> tuple[Companion, FakeAutopi
     return run_simulated(main())
 
 
-@pytest.mark.parametrize("busy_s", [0.0, 100.0])
-def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float) -> None:
-    """Idle (:func:`_guarded`), a first run with 2 could still end in time: nothing to do.
-    Busy for 100 s, even the smallest run with 2 would be late: the guard climbs over the
-    crossing leg for 2 without waiting for a run, and says so (``waiting``)."""
-    companion, autopilot = _guarded(busy_s)
+@pytest.mark.parametrize(("busy_s", "south_m"), [(0.0, 800.0), (100.0, 800.0), (100.0, 400.0)])
+def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float, south_m: float) -> None:
+    """Idle (:func:`_guarded`), a first run with a peer 800 m away could still end in time:
+    nothing to do.  Busy for 100 s, even the smallest run with it would be late -- but it
+    cannot be here sooner than 40 s, beyond the lead and margin (30 s): the guard waits (the
+    run may yet end in time, the peer may never come closer).  A peer 400 m away could be
+    here in 22 s: the guard climbs over the crossing leg for 2 without waiting for a run,
+    and says so (``waiting``)."""
+    companion, autopilot = _guarded(busy_s, south_m=south_m)
     actions = [e for e in companion.events if e.kind == "precautionary"]
-    if not busy_s:
+    if not busy_s or south_m > 500:
         assert not actions and not autopilot.uploads
         return
     (event,) = actions
@@ -473,3 +478,20 @@ def test_a_failed_task_is_logged_and_recorded(caplog: pytest.LogCaptureFixture) 
     assert any(r.exc_info and "boom" in str(r.exc_info[1]) for r in caplog.records)
     assert alive  # the group and the other task went on
     assert cancelled and not running  # stopped: every task of the group ended
+
+
+def test_a_late_result_is_acted_on_at_the_last_moment() -> None:
+    """The precaution for a result that comes too late is due only once the peer could be
+    here at the earliest (flying straight at us) within the lead and the margin (20 + 10 s):
+    a run may still end meanwhile, and a peer that never comes closer never gets that close.
+    The measured closing rate decides only whether the result is late.  With an infinite
+    lead it is due as soon as the result is known late (:func:`too_late`)."""
+    settings = FailsafeSettings(margin_s=10.0, lead_s=20.0)
+    assert not act_now(5.0, 40.0, 40.0, settings)  # in time
+    assert too_late(100.0, 40.0, settings) and not act_now(100.0, 40.0, 40.0, settings)
+    assert act_now(100.0, 40.0, 30.0, settings)  # the last moment (by the earliest)
+    assert not act_now(100.0, 200.0, 200.0, settings)  # (a peer that never comes closer)
+    assert act_now(12.0, 21.0, 21.0, settings) and not act_now(12.0, 23.0, 21.0, settings)
+    eager = FailsafeSettings(margin_s=10.0, lead_s=math.inf)
+    for needed, meet in itertools.product((5.0, 12.0, 100.0), (21.0, 30.0, 40.0, 200.0)):
+        assert act_now(needed, meet, 0.0, eager) == too_late(needed, meet, eager)

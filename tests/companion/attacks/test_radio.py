@@ -473,3 +473,41 @@ def test_forged_aborts_end_no_run_and_spend_nothing(tmp_path: Path) -> None:
     assert counted == len(results)
     assert not w.events(2, "answer_failed")
     assert w.drones[1].endpoint.stats.dropped.get("unproven_abort", 0) > 0
+
+
+def test_forged_session_traffic_delays_a_run_by_a_bounded_time(tmp_path: Path) -> None:
+    """Frame headers are public and anybody's to forge.  Drones defer to what they overhear
+    -- a peer heard in another pair's run is not asked (it would refuse BUSY), a channel
+    carrying another pair's run is left to it -- so the attacker keeps forging frames 'from
+    drone 2 to drone 77' twice a second, without end.  Drone 1 still gets its result with 2:
+    deferring is bounded (a minute, ``ENGAGED_DEFER_S`` and the ground's quiet wait, counted
+    together), as is the beacons' (four intervals and 15 s: they too give way to runs on the
+    air), so the attack costs at most that much over the unattacked world (measured: 47 s
+    against 138 s)."""
+    from companion.app.runtime import CompanionSettings
+    from companion.runs.alice import ENGAGED_DEFER_S
+
+    async def main(attacked: bool) -> float:
+        w = await world(tmp_path / str(attacked))
+        stop = False
+
+        async def forge() -> None:
+            while not stop:
+                frame = Frame(FrameType.DATA, 2, 77, 9, 0, 0, 3, bytes(20))
+                await w.inject(frame.encode())
+                await w.clock.sleep(0.5)
+
+        task = asyncio.create_task(forge()) if attacked else None
+        while not w.events(1, "result") and w.clock.now() < 900:
+            await w.clock.sleep(1.0)
+        stop = True
+        if task is not None:
+            await task
+        await w.stop()
+        assert w.events(1, "result")
+        return w.clock.now()
+
+    clean, attacked = run(main(False)), run(main(True))
+    beacons = 4 * CompanionSettings(node=1, autopilot_url="").beacon_interval_s + 15.0
+    assert attacked <= clean + ENGAGED_DEFER_S + beacons
+    assert attacked > clean  # the attack did make drone 1 wait (the deferring is real)

@@ -19,6 +19,7 @@ from companion.radio import (
     MessageTooLarge,
     PeerAborted,
 )
+from companion.radio.endpoint import ENGAGED_CYCLES
 from companion.radio.frames import AbortCode, FrameType, decode_frame
 from companion.sim.medium import Channel, Impairments, SimMedium, SimTransport
 from companion.sim.virtual_time import SimulationStalled, run_simulated
@@ -393,3 +394,40 @@ def test_a_dying_link_task_is_logged_and_fails_every_waiter(
     assert record.getMessage().startswith("task link-1-tx failed: OSError")
     assert record.exc_info is not None and record.exc_info[0] is OSError  # the traceback
     assert record.fields["task"] == "link-1-tx"  # type: ignore[attr-defined]
+
+
+def test_a_third_node_hears_who_is_in_a_run_and_when_the_channel_fell_quiet() -> None:
+    """Frame headers are public: a node that overhears another pair's session knows both are
+    engaged (a request to either would be refused BUSY) until ENGAGED_CYCLES frame-ACK cycles of
+    silence, and how long other pairs' runs have left the channel quiet; its own sessions
+    count for neither."""
+
+    async def main() -> None:
+        clock = Clock()
+        medium = SimMedium(Channel(Impairments(), seed=5), clock)
+        link = PROFILES["us915-sf7"]
+        a, b, c = (LinkEndpoint(n, medium.attach(n), link, clock=clock) for n in (1, 2, 3))
+        for node in (a, b, c):
+            await node.start()
+        assert not c.engaged(1) and not c.engaged(2)
+        assert c.others_quiet_s() == float("inf")
+
+        async def answer() -> None:
+            peer, session = await b.accept()
+            await b.receive(peer, session)
+
+        task = asyncio.create_task(answer())
+        await a.send(2, a.open(2), os.urandom(2000))
+        await task
+        assert c.engaged(1) and c.engaged(2) and not c.engaged(3)
+        assert c.others_quiet_s() < c.cycle_s
+        # the pair's own view: neither counts its own session as another pair's
+        assert not a.engaged(2) and not b.engaged(1)
+        assert a.others_quiet_s() == float("inf")
+        await clock.sleep(ENGAGED_CYCLES * c.cycle_s + 0.01)
+        assert not c.engaged(1) and not c.engaged(2)
+        assert c.others_quiet_s() > ENGAGED_CYCLES * c.cycle_s
+        for node in (a, b, c):
+            await node.close()
+
+    run_simulated(main())
