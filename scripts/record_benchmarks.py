@@ -304,9 +304,10 @@ def main() -> int:
         parser.error("replays-px4 needs PX4_SITL=path of a PX4 SITL build")
     for name in args.names or default:
         doc = TARGETS.get(name, DOC)
-        text = doc.read_text() if doc.exists() else "# Benchmarks\n"
         body = f"Machine: {machine}.\n\n{table[name]()}"
         print(body, flush=True)
+        # read after the (minutes of) measuring: another recorder may have written meanwhile
+        text = doc.read_text() if doc.exists() else "# Benchmarks\n"
         text = replace_section(text, name, body)
         tmp = doc.with_suffix(".md.tmp")
         tmp.write_text(text)

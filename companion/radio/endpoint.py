@@ -52,6 +52,8 @@ log = logging.getLogger("companion.radio")
 CALL = b"\x00"  # several channels: a session's first message, on the common channel
 ENGAGED_CYCLES = 16  # a node heard in another pair's session is engaged this long after
 # (busy_ten, BUSY refusals per replay: 22 with 2 cycles, 12 with 8, 6 with 20)
+GONE_CHECK_S = 5.0  # a receive told how to know a vanished peer looks this often
+GONE_QUIET_S = 30.0  # ... and gives up once the session, too, was quiet this long
 CALL_WAIT_S = 15.0  # a call not followed by a message this soon is forgotten
 GRACE_RTOS = 4.0  # a session closed on its own channel is listened to this many RTOs more
 FIRST_POLLS = 4  # several channels: a first message unanswered after this many probes fails
@@ -373,18 +375,32 @@ class LinkEndpoint:
                 timer.sample(self.clock.now() - sent_at)
             return
 
-    async def receive(self, peer: int, session: int, idle_timeout: float | None = None) -> bytes:
-        """The session's next message; LinkTimeout after ``idle_timeout`` of silence."""
+    async def receive(
+        self,
+        peer: int,
+        session: int,
+        idle_timeout: float | None = None,
+        gone: Callable[[], bool] | None = None,
+    ) -> bytes:
+        """The session's next message; LinkTimeout after ``idle_timeout`` of silence, or as
+        soon as ``gone()`` says the peer is no longer heard (its beacons) and the session has
+        been quiet for :data:`GONE_QUIET_S` (looked at every :data:`GONE_CHECK_S`): a drone
+        that flew out of range or landed does not hold a run for the whole idle timeout (5
+        minutes on US915; a city's hour had 94 runs still waiting when their drone landed)."""
         sess = self._session(peer, session)
         limit = self.idle_timeout if idle_timeout is None else idle_timeout
         while True:
             if sess.inbox.empty():
                 self._raise_if_aborted(sess)
+                quiet = self.clock.now() - sess.last_heard
+                if gone is not None and quiet >= GONE_QUIET_S and gone():
+                    raise LinkTimeout(f"node {peer} is no longer heard")
             remaining = sess.last_heard + limit - self.clock.now()
             if remaining <= 0 and sess.inbox.empty():
                 raise LinkTimeout(f"nothing from node {peer} for {limit:.0f} s")
+            wait = max(remaining, 0.0) if gone is None else min(max(remaining, 0.0), GONE_CHECK_S)
             try:
-                item = await self.clock.wait_for(sess.inbox.get(), max(remaining, 0.0))
+                item = await self.clock.wait_for(sess.inbox.get(), wait)
             except TimeoutError:
                 continue
             if isinstance(item, LinkError):  # the peer aborted, or the link failed

@@ -19,7 +19,7 @@ from companion.radio import (
     MessageTooLarge,
     PeerAborted,
 )
-from companion.radio.endpoint import ENGAGED_CYCLES
+from companion.radio.endpoint import ENGAGED_CYCLES, GONE_CHECK_S, GONE_QUIET_S
 from companion.radio.frames import AbortCode, FrameType, decode_frame
 from companion.sim.medium import Channel, Impairments, SimMedium, SimTransport
 from companion.sim.virtual_time import SimulationStalled, run_simulated
@@ -135,6 +135,25 @@ def test_a_vanished_peer_gives_a_timeout_not_a_hang() -> None:
             return loop.time()
 
     assert run_simulated(main()) < 600.0
+
+
+def test_a_peer_no_longer_heard_ends_the_wait_long_before_the_idle_timeout() -> None:
+    """A run waits for a drone that flew out of range or landed: told how to know (``gone``:
+    its beacons stopped), the link gives up once the session too has been quiet for
+    GONE_QUIET_S, not after the idle timeout (5 minutes on US915); a peer still heard is
+    waited for as long as before."""
+
+    async def main(heard: bool) -> float:
+        async with pair(PROFILES["us915-sf7"]) as p:
+            session = p.a.open(2)
+            start = p.a.clock.now()
+            with pytest.raises(LinkTimeout):
+                await p.a.receive(2, session, gone=lambda: not heard)
+            return p.a.clock.now() - start
+
+    idle = LinkConfig().idle_timeout(PROFILES["us915-sf7"])
+    assert GONE_QUIET_S <= run_simulated(main(False)) <= GONE_QUIET_S + GONE_CHECK_S + 0.1
+    assert run_simulated(main(True)) >= idle
 
 
 def test_silence_while_waiting_for_a_message_times_out() -> None:
