@@ -84,6 +84,12 @@ class LinkEndpoint:
         if self.payload_size < 16:
             raise ValueError(f"profile {profile.name} leaves no room for payload")
         self.idle_timeout = self.config.idle_timeout(profile)
+        # a frame, its ACK and two turnarounds: what the retransmission timer waits at least
+        self.cycle_s = (
+            profile.airtime(self.frame_size)
+            + profile.airtime(OVERHEAD + 2 + MAX_ACK_BITMAP)
+            + 2 * (profile.turnaround_s + self.config.latency_allowance_s)
+        )
         self.channels = self.config.channels
         if not 1 <= self.channels <= profile.channels:
             raise ValueError(
@@ -266,14 +272,6 @@ class LinkEndpoint:
         """Seconds since a frame of another pair's session was heard (on our channel)."""
         return self.clock.now() - self._others_at
 
-    @property
-    def cycle_s(self) -> float:
-        """A frame, its ACK and two turnarounds: what the retransmission timer waits at least."""
-        p = self.profile
-        ack = p.airtime(OVERHEAD + 2 + MAX_ACK_BITMAP)
-        turnarounds = 2 * (p.turnaround_s + self.config.latency_allowance_s)
-        return p.airtime(self.frame_size) + ack + turnarounds
-
     def budget_wait(self) -> float:
         """Seconds the next queued frame must still wait for the duty-cycle budget (0: none
         waits, or nothing is queued)."""
@@ -417,7 +415,7 @@ class LinkEndpoint:
         are small (US915 SF9), which a receiver puts together or drops whole."""
         seq, self._beacon_seq = self._beacon_seq, (self._beacon_seq + 1) & 0xFF
         frames = beacon_frames(self.node, seq, payload, self.payload_size)
-        done = [self.radio.enqueue(f.encode(), control=False, beacon=True) for f in frames]
+        done = [self._enqueue(frame, control=False, beacon=True) for frame in frames]
         for sent in done:
             await sent
 
@@ -443,8 +441,10 @@ class LinkEndpoint:
 
     # ------------------------------------------------------------------ radio
 
-    def _enqueue(self, frame: Frame, *, control: bool, channel: int = 0) -> asyncio.Future[float]:
-        return self.radio.enqueue(frame.encode(), control=control, channel=channel)
+    def _enqueue(
+        self, frame: Frame, *, control: bool, channel: int = 0, beacon: bool = False
+    ) -> asyncio.Future[float]:
+        return self.radio.enqueue(frame.encode(), control=control, channel=channel, beacon=beacon)
 
     # ------------------------------------------------------------------ channels
 
