@@ -19,6 +19,7 @@ from protocol.ot.setup import DEFAULT_SECURITY
 class CompanionSettings:
     node: int
     autopilot_url: str
+    autopilot_connect_s: float = 10.0  # no autopilot heard on the URL this long: an error
     ardupilot: bool = False
     suite: Suite = Suite.COMPACT
     ot_security: int = DEFAULT_SECURITY  # kappa of the OT setups we start (as Alice)

@@ -4,6 +4,7 @@
 
     node = 1
     autopilot = "udpin://0.0.0.0:14540"   # MAVSDK URL; PX4 SITL instance i: 14540 + i
+    autopilot_connect_s = 10.0            # no autopilot heard on it this long: an error
     ardupilot = false
     suite = "compact"                     # or "paper" (Paillier + DGK, the paper's design)
     ot_security = 112                     # compact suite, as Alice: 112 or 128-bit OT (Delta)
@@ -18,6 +19,8 @@
     offset_m = 10.0
     direction = "up"
     max_altitude_m = 120.0
+    max_levels = 0                        # offsets above the plan at most, beyond them a hold
+                                          # (0: raises go up to the ceiling, then a hold)
     [identity]                            # python -m companion keys init|certify
     key = "drone1.key"                    # this drone's signing key (paths: from this file)
     certificate = "drone1.cert"           # its operator's certificate (names this node)
@@ -214,8 +217,14 @@ def _offset(doc: Table) -> OffsetSettings:
     max_altitude_m = offset.number(
         "max_altitude_m", BASE.offset.max_altitude_m, low=0.0, above=True
     )
+    levels = offset.integer("max_levels", BASE.offset.max_levels or 0, low=0, high=100)
     try:
-        return OffsetSettings(offset_m=offset_m, direction=direction, max_altitude_m=max_altitude_m)
+        return OffsetSettings(
+            offset_m=offset_m,
+            direction=direction,
+            max_altitude_m=max_altitude_m,
+            max_levels=levels or None,
+        )
     except ValueError as exc:
         raise offset.fail(str(exc)) from None
 
@@ -263,6 +272,7 @@ def _companion(doc: Table) -> functools.partial[CompanionSettings]:
     return functools.partial(
         CompanionSettings,
         autopilot_url=autopilot_url,
+        autopilot_connect_s=_positive(doc, "autopilot_connect_s", BASE.autopilot_connect_s),
         ardupilot=doc.flag("ardupilot", BASE.ardupilot),
         suite=suites[suite],
         ot_security=ot_security,

@@ -181,7 +181,7 @@ async def run(args: argparse.Namespace) -> int:
 
     from companion.app.config import load_config
     from companion.app.runtime import Companion
-    from companion.mission.autopilot import Autopilot
+    from companion.mission.autopilot import Autopilot, Timeouts
     from companion.mission.personalities import personality
     from companion.radio import LinkEndpoint, profile
 
@@ -199,7 +199,9 @@ async def run(args: argparse.Namespace) -> int:
     log.info("node %d: connecting to the autopilot at %s", settings.node, settings.autopilot_url)
     try:
         autopilot = await Autopilot.connect(
-            settings.autopilot_url, personality=personality(settings.ardupilot)
+            settings.autopilot_url,
+            Timeouts(connect_s=settings.autopilot_connect_s),
+            personality(settings.ardupilot),
         )
     except BaseException:
         await transport.close()  # the link's socket and keep-alive end with the error

@@ -8,7 +8,7 @@ import itertools
 import math
 from collections.abc import Sequence
 
-from protocol.geo.geodesy import ground_offset
+from protocol.geo.geodesy import ground_offset, moved
 from protocol.run import DEFAULT_LIMITS
 
 
@@ -17,14 +17,42 @@ def distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
     return math.hypot(*ground_offset(a[0] / 1e7, a[1] / 1e7, b[0] / 1e7, b[1] / 1e7))
 
 
-def segment_distance_m(p: tuple[int, int], a: tuple[int, int], b: tuple[int, int]) -> float:
-    """Ground distance from point p to segment ab (degE7), on the tangent plane at p."""
+def _foot(
+    p: tuple[int, int], a: tuple[int, int], b: tuple[int, int]
+) -> tuple[float, float, float, float, float]:
+    """On the tangent plane at p (metres east, north): a's offset from p, the step from a to
+    b, and where along it (0..1) p's foot on segment ab lies."""
     ay, ax = ground_offset(p[0] / 1e7, p[1] / 1e7, a[0] / 1e7, a[1] / 1e7)
     by, bx = ground_offset(p[0] / 1e7, p[1] / 1e7, b[0] / 1e7, b[1] / 1e7)
     dx, dy = bx - ax, by - ay
     length2 = dx * dx + dy * dy
     t = 0.0 if length2 == 0 else max(0.0, min(1.0, -(ax * dx + ay * dy) / length2))
+    return ax, ay, dx, dy, t
+
+
+def segment_distance_m(p: tuple[int, int], a: tuple[int, int], b: tuple[int, int]) -> float:
+    """Ground distance from point p to segment ab (degE7), on the tangent plane at p."""
+    ax, ay, dx, dy, t = _foot(p, a, b)
     return math.hypot(ax + t * dx, ay + t * dy)
+
+
+def cut_behind(
+    path: Sequence[tuple[int, int]], position: tuple[int, int], back_m: float
+) -> list[tuple[int, int]]:
+    """``path`` with its first segment starting ``back_m`` behind ``position``'s foot on it
+    (never before its first vertex): what lies further behind is flown.  The drone flies
+    the first segment; off it (a climb at its start, a turn) the foot is where it is bound
+    to rejoin it."""
+    if len(path) < 2:
+        return list(path)
+    a = path[0]
+    _, _, dx, dy, t = _foot(position, a, path[1])
+    length = math.hypot(dx, dy)
+    t = t - back_m / length if length > 0 else 0.0
+    if t <= 0:
+        return list(path)
+    cut = moved(a[0] / 1e7, a[1] / 1e7, t * dy, t * dx)
+    return [(round(cut[0] * 1e7), round(cut[1] * 1e7)), *path[1:]]
 
 
 def cut_at(

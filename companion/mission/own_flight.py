@@ -19,7 +19,7 @@ from companion.context import Context
 from companion.events import EventKind, Retimed
 from companion.mission.flight_model import MAX_PREDICTION_S, Kinematics
 from companion.mission.flightpath import FlightPath, flight_path
-from companion.mission.ground import distance_m, near_cut
+from companion.mission.ground import cut_behind, distance_m, near_cut
 from companion.mission.items import NAV_LOITER_TIME, NAV_WAYPOINT, MissionItem
 from companion.mission.levels import Slots
 from companion.mission.planner import Edit
@@ -34,6 +34,7 @@ OVER_ITEM_M = 5.0  # this close to its current item's point, the vehicle is hold
 TIMING_LOOK_S = 180.0  # how far ahead the timing watch predicts (the full schedule is kept)
 TIMING_EVERY_S = 5.0  # and how often
 PREDICTIONS_KEPT = 8  # schedules remembered for a vehicle state (several paths and limits)
+CUT_BACK_M = 5.0  # a run's first leg starts this far behind the drone (position error, lag)
 NEAR_SEGMENTS = 2  # each side of a near run compares at least its next two segments
 
 
@@ -180,6 +181,14 @@ class OwnFlight:
         if self.vehicle.on_ground and current >= last:
             return len(path.points) - 1, points[-1:]
         return start, points
+
+    def from_here(self, path: list[tuple[int, int]]) -> list[tuple[int, int]]:
+        """``path`` (from the leg flown now on: :meth:`remaining_path`, :meth:`remaining_flown`)
+        with that leg cut where the drone is, less CUT_BACK_M: what a run compares of it.  A
+        leg's flown part is no conflict -- nothing flies it again -- yet it kept a held drone
+        waiting until its peer had left the whole leg it crossed on, minutes later."""
+        here = self.vehicle.here()
+        return list(path) if here is None else cut_behind(path, here, CUT_BACK_M)
 
     def ahead(self, raises: dict[int, float]) -> dict[int, float]:
         """The raises of the segments not flown yet (all of them before take-off)."""

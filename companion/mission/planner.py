@@ -46,12 +46,23 @@ class OffsetSettings:
     max_altitude_m: float = 120.0  # relative / terrain frames (height above home or ground)
     min_altitude_m: float = 5.0  # relative / terrain frames, when going down
     max_altitude_amsl_m: float | None = None  # AMSL frames, if the operator sets one
+    # Offsets a raise may climb above the plan; a conflict no raise that low clears is
+    # resolved by time instead (a hold before it: companion.runs.edits).  None: up to the
+    # ceiling (then a hold).  Off by default: docs/companion.md says why.
+    max_levels: int | None = None
 
     def __post_init__(self) -> None:
         if not self.offset_m > 0:
             raise PlannerError("offset must be positive (choose the direction separately)")
         if self.direction not in ("up", "down"):
             raise PlannerError(f"direction must be 'up' or 'down', not {self.direction!r}")
+        if self.max_levels is not None and self.max_levels < 1:
+            raise PlannerError(f"max_levels must be at least 1, not {self.max_levels}")
+
+    @property
+    def max_raise_m(self) -> float:
+        """The largest raise before a hold (inf: none)."""
+        return math.inf if self.max_levels is None else self.max_levels * self.offset_m
 
     @property
     def delta(self) -> float:

@@ -30,6 +30,7 @@ class Peer:
     role: Role | None = None  # once this pair has met: roles then stay
     compared: tuple[int, int] | None = None  # (peer's, our) mission versions of the last run
     next_try: float = 0.0
+    recheck_at: float = math.inf  # we hold for it: compare again from then on (same versions)
     retry_in: float | None = None  # after a run without result: retry this soon (None: the
     # settings' retry_after_s)
     busy: bool = False  # it refused our last request BUSY: asked again soon

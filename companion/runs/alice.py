@@ -149,6 +149,7 @@ class AliceRuns:
                 if peer.plan_version != version:
                     peer.covered, peer.settled, peer.near_run = set(), set(), None
                 peer.plan, peer.plan_version = self._phases(peer), version
+                peer.recheck_at = math.inf
         # A full run after a near run waits until it is needed (or the channel is quiet):
         # meanwhile the radio serves every drone's near runs.
         quiet = not self.endpoint.busy(QUIET_S) and not self.air.turns.waiting()
@@ -460,6 +461,7 @@ class AliceRuns:
     async def _run(self, peer: Peer, phase: Phase, horizon: int) -> bool:
         """One run; True when it ended with a result (or had nothing to compare)."""
         start, path = self.flight.remaining_path()
+        current = start
         if phase is Phase.NEAR:
             skip = self._before_meeting(peer, start, path)
             if skip:  # what is left of the horizon after the segments skipped
@@ -479,6 +481,8 @@ class AliceRuns:
             chunk = self._full_chunk(peer, start, path)
             peer.full_left = chunk < len(path) - 1
             path = path[: chunk + 1]
+        if start == current:  # the leg we fly: from here on
+            path = self.flight.from_here(path)
         if len(path) < 2:
             return True
         neighbour = self.neighbourhood.registry.get(peer.node)

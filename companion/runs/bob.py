@@ -99,7 +99,7 @@ class BobAnswers:
         horizon, with its bands (on her grid) and windows (after her epoch) when she asks
         for them."""
         start, path = self.flight.remaining_flown()
-        path = self.flight.near(path, hello.horizon_m)
+        path = self.flight.near(self.flight.from_here(path), hello.horizon_m)
         points = point_as_segment(path)  # hovering: a point
         volumes = hello.volumes
         if not (volumes.bands or volumes.windows):

@@ -6,10 +6,24 @@ Conflicts (from Alice's runs) and precautions (from the fail-safe,
 flies each raised segment at its raise from end to end
 (:func:`companion.mission.planner.plan_edit`); a precaution may instead hold before a segment
 until the result is in.
+
+Raises climb up to the ceiling, or at most ``offset.max_levels`` offsets above the plan when
+that is set (six drones through one point stacked five levels, +50 m, one on another).  A
+conflict no raise that high clears is resolved by *time*: the drone holds before its first
+such segment until a comparison says it may fly on.  While it holds, its windows are open
+from now to the end (:meth:`companion.mission.own_flight.OwnFlight.keep_time`), so that
+comparison is "may I leave now and come at any time after?": clear once the peer's
+remaining path no longer comes near the held segments (it has passed).  The peer is asked
+again ``HOLD_RECHECK_S`` after each result that still flags them.  Chosen as
+deterministically as levels: only the pair's Alice learns of the conflict and holds.  Holds
+that wait on one another in a ring would never end: a hold longer than ``MAX_HOLD_S`` gives
+way to raises up to the ceiling for the rest of the flight, and what the ceiling cannot
+clear is flown as planned (reported), not held for again.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 from companion.context import Context
@@ -31,6 +45,9 @@ from companion.mission.planner import Edit, PlannerError, fixed_segments, plan_e
 from companion.neighbours.neighbourhood import Neighbourhood
 from companion.neighbours.peers import Peer
 from companion.runs.failsafe import Action
+
+HOLD_RECHECK_S = 20.0  # holding for a conflict: the peer is asked again this long after a result
+MAX_HOLD_S = 180.0  # a hold for conflicts this long: raises up to the ceiling instead
 
 
 class Edits:
@@ -54,6 +71,10 @@ class Edits:
         self.flagged: set[int] = set()  # segments the comparisons found in conflict
         self.precaution: dict[int, set[int]] = {}  # peer -> segments climbed as a precaution
         self.holding: set[int] = set()  # peers we hold for
+        # peer -> segments no raise within max_levels clears (conflicts or precautions): we
+        # hold before them until a comparison clears them
+        self.time_holds: dict[int, set[int]] = {}
+        self.unbounded = False  # a hold lasted MAX_HOLD_S: raises go to the ceiling from now on
 
     def covers(self, node: int) -> bool:
         """A precaution for this peer stands (a climb, a hold, or one only reported)."""
@@ -72,7 +93,8 @@ class Edits:
             self.ctx.spawn(self._hold_before(node, segments[0]), "hold")
 
     async def _hold_before(self, peer: int, segment: int) -> None:
-        """Pause the mission once the vehicle reaches the start of ``segment``."""
+        """Pause the mission once the vehicle reaches the start of ``segment`` (at once if it
+        flies it already)."""
         vs = self.flight.path.vertices
         end = vs[min(segment + 1, len(vs) - 1)]
         gate = min(end.items, default=0)  # the segment is flown once its end item is current
@@ -85,10 +107,34 @@ class Edits:
             self.ctx.record(EventKind.HOLD, Hold(peer=peer, before_segment=segment))
         except AutopilotError as exc:
             self.ctx.record(EventKind.HOLD_FAILED, PeerFailure(peer=peer, error=str(exc)))
+            return
+        if peer in self.time_holds:
+            self.ctx.spawn(self._hold_limit(), "hold limit")
+
+    async def _hold_limit(self) -> None:
+        """Holds for conflicts that wait on one another (A for B, B for C, C for A) never
+        end: after MAX_HOLD_S the raises go up to the ceiling instead, and no conflict is
+        held for again."""
+        await self.ctx.clock.sleep(MAX_HOLD_S)
+        if self.time_holds and self.vehicle.held and not self.unbounded:
+            self.unbounded = True
+            self.ctx.record(
+                EventKind.PLAN_FAILED,
+                Problem(error=f"held {MAX_HOLD_S:g} s for {sorted(self.time_holds)}: raises "
+                        "go up to the ceiling from now on"),
+            )  # fmt: skip
+            await self.replan("a hold lasted too long")
 
     async def release(self, node: int) -> None:
-        """The result is in: precautions for this peer end."""
+        """The result is in: precautions for this peer end (a hold for a conflict with it
+        ends when a comparison clears the held segments: :meth:`_hold_for`)."""
         self.precaution.pop(node, None)
+        if node in self.time_holds:
+            return
+        await self._end_hold(node)
+
+    async def _end_hold(self, node: int) -> None:
+        """We no longer hold for ``node``: fly on unless we hold for another peer."""
         if node not in self.holding:
             return
         self.holding.discard(node)
@@ -126,8 +172,12 @@ class Edits:
         """Upload the raises the conflicts and precautions call for, if they changed."""
         async with self.flight.editing:
             clear_of = sorted(n for n, p in self.peers.items() if self._keeps_clear_of(p))
-            raises = self._raises(clear_of)
-            if raises is None or self.flight.ahead(raises) == self.flight.ahead(self.flight.raises):
+            planned = self._raises(clear_of)
+            if planned is None:
+                return
+            raises, unresolved = planned
+            await self._hold_for(unresolved)
+            if self.flight.ahead(raises) == self.flight.ahead(self.flight.raises):
                 return
             try:
                 edit = plan_edit(
@@ -164,17 +214,50 @@ class Edits:
                 ),
             )
 
-    def _raises(self, clear_of: list[int]) -> dict[int, float] | None:
-        """The raises the conflicts and precautions call for (None: no clear altitude,
-        recorded).  A raise only grows while its conflict stands: a peer whose announced
-        slots shrink (it flew on, it landed) is no reason for another edit in flight."""
+    async def _hold_for(self, unresolved: list[int]) -> None:
+        """Hold for each peer whose conflicts (or precautions) include segments no raise
+        within max_levels clears, before the first of them still ahead; end the holds of
+        peers whose such segments a comparison cleared; while held, ask the peers held for
+        again HOLD_RECHECK_S after each result."""
+        start = self.flight.remaining_path()[0]
+        wanted: dict[int, set[int]] = {}
+        timed = self.settings.offset.max_levels is not None and not self.unbounded
+        for node, peer in self.peers.items() if timed else ():
+            segments = (peer.conflicts | self.precaution.get(node, set())) & set(unresolved)
+            if ahead := {k for k in segments if k >= start}:
+                wanted[node] = ahead
+        for node in [n for n in self.time_holds if n not in wanted]:
+            del self.time_holds[node]
+            if node in self.peers:
+                self.peers[node].recheck_at = math.inf
+            await self._end_hold(node)
+        now = self.ctx.clock.now()
+        for node, segments in wanted.items():
+            peer = self.peers[node]
+            if node not in self.time_holds and node not in self.holding:
+                self.holding.add(node)
+                self.ctx.spawn(self._hold_before(node, min(segments)), "hold")
+            self.time_holds[node] = segments
+            if self.vehicle.held and peer.conflicts & segments and math.isinf(peer.recheck_at):
+                peer.recheck_at = now + HOLD_RECHECK_S
+
+    def _raises(self, clear_of: list[int]) -> tuple[dict[int, float], list[int]] | None:
+        """The raises the conflicts and precautions call for, and the segments none within
+        max_levels (or under the ceiling) clears (None: no clear altitude, recorded).  A
+        raise only grows while its conflict stands: a peer whose announced slots shrink (it
+        flew on, it landed) is no reason for another edit in flight."""
         offset = self.settings.offset
         bands = self.flight.planned_bands()
         # up to the ceiling (metres above home): the planned top of each band is its top
-        # less our altitude error
+        # less our altitude error; and no more than max_levels offsets (then: a hold)
         ceiling = self.flight.home_deg()[2] + offset.max_altitude_m
         error = self.settings.separation.tolerance.altitude_m
-        headroom = {k: ceiling - (top - error) for k, (_, top) in bands.items()}
+        cap = math.inf if self.unbounded else offset.max_raise_m
+        up = offset.direction == "up"
+        headroom = {
+            k: min(ceiling - (top - error) if up else math.inf, cap)
+            for k, (_, top) in bands.items()
+        }
         try:
             raises, unresolved = plan_raises(
                 {node: p.conflicts for node, p in self.peers.items()},
@@ -185,19 +268,19 @@ class Edits:
                 self.settings.separation.vertical_m,
                 1.0 if offset.direction == "up" else -1.0,
                 keep_clear=clear_of,
-                headroom=headroom if offset.direction == "up" else None,
+                headroom=headroom if up or math.isfinite(cap) else None,
             )
         except NoClearAltitude as exc:
             self.ctx.record(EventKind.PLAN_FAILED, Problem(error=str(exc)))
             return None
-        if unresolved:
+        if unresolved and (offset.max_levels is None or self.unbounded):
             error_text = (
                 f"segments {unresolved}: no altitude under the ceiling "
                 f"({offset.max_altitude_m:g} m) clears the peers they conflict with"
             )
             self.ctx.record(EventKind.PLAN_FAILED, Problem(error=error_text))
         held = self.flight.raises
-        return {k: max(v, held.get(k, v), key=abs) for k, v in raises.items()}
+        return {k: max(v, held.get(k, v), key=abs) for k, v in raises.items()}, unresolved
 
     async def _upload(self, edit: Edit) -> tuple[list[MissionItem], int, float]:
         """Upload ``edit`` (read back by the autopilot): the items the vehicle now holds, the

@@ -20,7 +20,7 @@ from companion.neighbours.peers import Peer
 from companion.radio.endpoint import LinkEndpoint
 from companion.runs.edits import Edits
 from companion.runs.estimates import RunEstimates
-from companion.runs.failsafe import act_now, at_risk, too_late
+from companion.runs.failsafe import Action, act_now, at_risk, too_late
 from companion.runs.standing import Standing
 from protocol.geo.grid import GridSpec
 from protocol.intersection import Alice
@@ -158,7 +158,10 @@ class Guard:
             path, start, self.vehicle.here(), speed, peer.position,
             self.neighbourhood.peer_speed(peer), needed, settings, decided,
             peer_age_s=peer.position_age(self.ctx.clock.now()),
-            entered=[w[0] for w in windows], left=[w[1] for w in windows],
+            entered=[w[0] for w in windows],
+            # A hold stops at the start of the first segment at risk, the end of the one
+            # before: that one is not left before the peer comes, whatever the schedule says.
+            left=None if settings.action is Action.HOLD else [w[1] for w in windows],
         )  # fmt: skip
         if not risky:
             return

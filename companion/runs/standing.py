@@ -37,6 +37,8 @@ class Standing:
             return False
         if distance_m(self.vehicle.position[:2], peer.position) > self.settings.initiation_range_m:
             return False
+        if self.clock.now() >= peer.recheck_at:  # a hold for it asks again
+            return True
         return peer.compared != (peer.beacon.mission_version, self.flight.compare_version)
 
     def due(self, peer: Peer, now: float) -> bool:

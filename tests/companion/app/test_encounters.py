@@ -16,18 +16,26 @@ import pytest
 from companion.app.runtime import Companion, CompanionSettings
 from companion.mission.files import read_plan
 from companion.mission.flightpath import flight_path
-from companion.mission.ground import cut_at, distance_m, near_cut, reached_within
+from companion.mission.ground import cut_at, cut_behind, distance_m, near_cut, reached_within
 from companion.mission.items import MissionItem
 from companion.mission.levels import NoClearAltitude, Slots, clear_raise, plan_raises
 from companion.mission.own_flight import box_radius_m
-from companion.mission.planner import plan_offsets
+from companion.mission.planner import OffsetSettings, plan_offsets
 from companion.neighbours.beacon import Beacon
 from companion.neighbours.peers import Peer, time_to_meet
 from companion.radio import PROFILES
 from companion.radio.airtime import DutyCycle
 from companion.radio.clock import Clock
 from companion.radio.endpoint import LinkEndpoint
-from companion.runs.failsafe import FailsafeSettings, act_now, at_risk, run_seconds, too_late
+from companion.runs.edits import HOLD_RECHECK_S
+from companion.runs.failsafe import (
+    Action,
+    FailsafeSettings,
+    act_now,
+    at_risk,
+    run_seconds,
+    too_late,
+)
 from companion.runs.turns import ANSWER_FULL, ANSWER_NEAR, OWN_FULL, OWN_NEAR, RadioTurns
 from companion.sim.fleet import make_fleet
 from companion.sim.medium import Impairments, SimMedium
@@ -57,19 +65,42 @@ def beacon(position: tuple[int, int], slots: Slots | None = None) -> Beacon:
     )  # fmt: skip
 
 
-def alone(items: list[MissionItem], clock: Clock) -> tuple[Companion, FakeAutopilot]:
-    """Drone 1's companion on a radio of its own, beside a fake autopilot holding ``items``."""
+def alone(
+    items: list[MissionItem],
+    clock: Clock,
+    action: Action = Action.CLIMB,
+    offset: OffsetSettings | None = None,
+) -> tuple[Companion, FakeAutopilot]:
+    """Drone 1's companion on a radio of its own, beside a fake autopilot holding ``items``
+    (its fail-safe's precaution: ``action``; its raises: ``offset``)."""
     state = Path(tempfile.mkdtemp(prefix="encounter-state-"))
     endpoint = LinkEndpoint(1, SimMedium(clock=clock).attach(1), PROFILES["us915-sf7"])
     autopilot = FakeAutopilot(items)
     c = Companion(
-        CompanionSettings(node=1, autopilot_url=""),
+        CompanionSettings(
+            node=1,
+            autopilot_url="",
+            failsafe=FailsafeSettings(action),
+            offset=offset or OffsetSettings(),
+        ),
         endpoint,
         autopilot,  # type: ignore[arg-type]
         make_fleet([(1, "fleet")], state)[1],
     )
     c.flight.load(list(items), None)
     return c, autopilot
+
+
+def test_a_run_compares_the_leg_flown_now_from_the_drone_on() -> None:
+    """The leg's flown part is cut off 5 m behind the drone's foot on it (a drone off the leg
+    counts from where it rejoins it); near its start, or before it, nothing is cut."""
+    path = [north(0), north(300), north(600)]
+    cut = cut_behind(path, north(100), 5.0)
+    assert distance_m(cut[0], north(95)) < 0.05 and cut[1:] == path[1:]
+    aside = cut_behind(path, (north(200)[0], north(200)[1] + 2000), 5.0)  # 15 m east of it
+    assert distance_m(aside[0], north(195)) < 0.05
+    assert cut_behind(path, north(3), 5.0) == path == cut_behind(path, north(-50), 5.0)
+    assert distance_m(cut_behind(path, north(400), 5.0)[0], north(295)) < 0.05  # past its end
 
 
 def test_cut_counts_from_the_drone() -> None:
@@ -338,7 +369,7 @@ def test_profiles() -> None:
 
 
 def _guarded(
-    busy_s: float, raised: bool = False, south_m: float = 400.0
+    busy_s: float, raised: bool = False, south_m: float = 400.0, action: Action = Action.CLIMB
 ) -> tuple[Companion, FakeAutopilot]:
     """Drone 1 flies east towards the crossing at 0 m (425 m ahead); peer 2, ``south_m``
     south of it, waits for its turn while the radio is busy with a run with peer 3 for ``busy_s``;
@@ -348,7 +379,7 @@ def _guarded(
 
     async def main() -> tuple[Companion, FakeAutopilot]:
         clock = Clock()
-        c, autopilot = alone(items, clock)
+        c, autopilot = alone(items, clock, action)
         c.vehicle.relative_alt, c.vehicle.current_item, c.vehicle.speed_m_s = (
             30.0,
             2,
@@ -388,6 +419,61 @@ def test_guard_acts_for_a_peer_waiting_behind_another_run(busy_s: float, south_m
     assert event.detail["waiting"] and event.detail["peer"] == 2
     assert 1 in event.detail["segments"]  # the leg over the crossing
     assert companion.flight.raises.get(1, 0) >= 10.0 and autopilot.uploads  # climbed clear of it
+
+
+def test_a_hold_stops_short_of_everything_the_peer_can_reach() -> None:
+    """The peer 400 m away (:func:`_guarded`) cannot reach the leg we fly now before the
+    schedule has us leave it: a climb covers the legs from the next on.  A hold stops at the
+    end of this leg -- the start of the next, within the peer's reach -- so it must begin on
+    this one (a real-time replay under load held at the crossing's vertex and came 2 m from
+    its peer)."""
+    climbed, _ = _guarded(100.0, action=Action.CLIMB)
+    held, _ = _guarded(100.0, action=Action.HOLD)
+    (climb,) = [e.detail for e in climbed.events if e.kind == "precautionary"]
+    (hold,) = [e.detail for e in held.events if e.kind == "precautionary"]
+    assert climb["segments"][0] == 1 and hold["segments"] == [0, *climb["segments"]]
+    assert hold["action"] == "hold" and held.edits.holding == {2}
+
+
+@pytest.mark.parametrize("max_levels", [2, None])
+def test_a_conflict_no_raise_within_the_levels_clears_is_held_for(max_levels: int | None) -> None:
+    """Peer 2 announces our altitude and 10-30 m above it: clearing it on the crossing leg
+    (segment 1) takes 45 m.  Without a limit the drone climbs that; with two levels (20 m)
+    it holds before the leg instead, asks the peer again HOLD_RECHECK_S after a result that
+    still flags it, and flies on once a comparison clears the leg (the peer passed)."""
+    items, _ = read_plan(SCENARIOS / "inflight_east.plan")
+
+    async def main() -> tuple[Companion, FakeAutopilot, list[object]]:
+        clock = Clock()
+        c, autopilot = alone(items, clock, offset=OffsetSettings(max_levels=max_levels))
+        await c._tasks.open()  # the hold's task
+        c.vehicle.relative_alt, c.vehicle.current_item, c.vehicle.speed_m_s = 30.0, 2, 10.0
+        c.vehicle.position = (*c.flight.path.points[1], 518.0)
+        stacked = Slots.of([(517.0, 519.0), (527.0, 547.0)])
+        peer = Peer(2, beacon((C_LAT, C_LON), stacked), heard_at=0.0, conflicts={1})
+        c.neighbourhood.peers[2] = peer
+        await c.edits.replan("a conflict on the crossing leg")
+        seen: list[object] = [dict(c.flight.raises), dict(c.edits.time_holds)]
+        c.vehicle.current_item = max(c.flight.path.vertices[2].items)  # on the leg: hold
+        await clock.sleep(1.0)
+        c.vehicle.held = True
+        peer.recheck_at = math.inf
+        await c.edits.replan("the result of a run still flags it")
+        seen += [autopilot.pauses, peer.recheck_at - clock.now()]
+        peer.conflicts = set()
+        await c.edits.replan("a run cleared the leg")
+        seen += [autopilot.resumes, dict(c.edits.time_holds)]
+        await c._tasks.close()
+        return c, autopilot, seen
+
+    _, _, seen = run_simulated(main())
+    if max_levels is None:
+        assert seen[:2] == [{1: 45.0}, {}] and seen[2] == 0  # climbed, never held
+        return
+    raises, holds, pauses, recheck, resumes, after = seen
+    assert raises == {} and holds == {2: {1}}  # no climb past two levels: a hold
+    assert pauses == 1 and recheck == pytest.approx(HOLD_RECHECK_S)
+    assert resumes == 1 and after == {}
 
 
 def test_guard_leaves_a_leg_already_raised_for_the_peer() -> None:

@@ -100,12 +100,14 @@ def test_config_file_and_flags(tmp_path: Path) -> None:
     path.write_text(
         'node = 3\nautopilot = "udpin://0.0.0.0:14542"\not_security = 128\n'
         '[link]\nprofile = "eu868-sf7"\n'
-        "[offset]\noffset_m = 15\n[limits]\nmax_runs_per_peer = 2\n"
+        "[offset]\noffset_m = 15\nmax_levels = 2\n[limits]\nmax_runs_per_peer = 2\n"
     )
     config = load_config(path, {"link.profile": "us915-sf9", "offset.max_altitude_m": 90})
     assert config.companion.node == 3 and config.companion.offset.offset_m == 15.0
     assert config.link.profile == "us915-sf9"  # the flag wins
     assert config.companion.offset.max_altitude_m == 90.0
+    assert config.companion.offset.max_levels == 2 and config.companion.offset.max_raise_m == 30
+    assert load_config(None, {"node": 1}).companion.offset.max_levels is None  # to the ceiling
     assert config.companion.max_runs_per_peer == 2
     assert config.companion.ot_security == 128
     assert load_config(None, {"node": 1}).companion.ot_security == 112  # the default
@@ -119,6 +121,7 @@ def test_config_file_and_flags(tmp_path: Path) -> None:
         ("node = 1\n[link]\ntransport = 'wifi'\n", r"\[link\]: transport"),
         ("node = 1\n[offset]\noffset_m = -3\n", r"\[offset\]: offset_m: -3 is out of range"),
         ("node = 1\n[offset]\noffset_m = nan\n", "offset_m: nan is not a finite number"),
+        ("node = 1\n[offset]\nmax_levels = -1\n", r"\[offset\]: max_levels: -1 is out of range"),
         ("node = 1\n[limits]\nmax_runs_per_peer = 'many'\n", "max_runs_per_peer"),
         ("node = 1\nlog_level = 'loud'\n", "log_level"),
         ("node = 1\not_security = 80\n", "ot_security"),
@@ -216,11 +219,12 @@ def test_companion_process_starts_and_stops_cleanly(tmp_path: Path) -> None:
 def test_no_autopilot_is_a_clear_error(tmp_path: Path) -> None:
     config = tmp_path / "c.toml"
     config.write_text(
-        'node = 7\nautopilot = "udpin://127.0.0.1:14599"\n[link]\nhub = "127.0.0.1:9"\n'
-        + identity(tmp_path, 7)
+        'node = 7\nautopilot = "udpin://127.0.0.1:14599"\nautopilot_connect_s = 1.5\n'
+        '[link]\nhub = "127.0.0.1:9"\n' + identity(tmp_path, 7)
     )
     run = _companion("run", "--config", str(config))
     assert run.returncode == 2 and "no autopilot heard" in run.stderr  # the environment
+    assert "within 1.5 s" in run.stderr
     config.write_text('node = 7\nautopilot = "udpin://127.0.0.1:14599"\n')
     anonymous = _companion("run", "--config", str(config))
     assert anonymous.returncode == 2 and "needs an identity" in anonymous.stderr

@@ -47,6 +47,7 @@ class FakeAutopilot:
     def __init__(self, mission: list[MissionItem]) -> None:
         self.mission = mission
         self.uploads: list[list[MissionItem]] = []
+        self.pauses = self.resumes = 0
 
     async def download(self) -> list[MissionItem]:
         return self.mission
@@ -56,10 +57,10 @@ class FakeAutopilot:
         self.mission = new
 
     async def pause(self) -> None:
-        pass
+        self.pauses += 1
 
     async def resume(self) -> None:
-        pass
+        self.resumes += 1
 
 
 @dataclass
