@@ -16,6 +16,7 @@ from companion.neighbours.beacon import Beacon
 from companion.roles import Phase, Role
 from protocol.run import DEFAULT_LIMITS
 
+TRACK_KEPT = 32  # plausible positions kept per peer (its track: minutes of beacons)
 MAX_SPEED_M_S = 40.0  # no drone flies faster: beacon speeds are capped, boxes bounded by it
 TRACK_SLACK_M = 200.0  # position error a track allows on top of MAX_SPEED_M_S
 
@@ -54,6 +55,8 @@ class Peer:
     # TRACK_SLACK_M plus MAX_SPEED_M_S since the anchor before.  A run's box is checked
     # against it (companion.runs.bob), not against a claim out of nowhere.
     anchor: tuple[float, tuple[int, int]] | None = None
+    # the anchors before it, oldest first (TRACK_KEPT at most): where it was when
+    track: list[tuple[float, tuple[int, int]]] = field(default_factory=list)
 
     @property
     def size(self) -> int:
@@ -98,12 +101,23 @@ class Peer:
         here = (beacon.lat, beacon.lon)
         if self.anchor is None or distance_m(self.anchor[1], here) <= self.reach_m(made):
             self.anchor = (made, here)
+            self.track = [*self.track[1 - TRACK_KEPT :], self.anchor]
 
     def reach_m(self, now: float) -> float:
         """How far from its anchor it may plausibly be at ``now`` (link time)."""
         if self.anchor is None:
             return 0.0
         return TRACK_SLACK_M + MAX_SPEED_M_S * max(now - self.anchor[0], 0.0)
+
+    def plausible_at(self, point: tuple[int, int], when: float, within_s: float = 0.0) -> bool:
+        """Whether it may have been at ``point`` at link time ``when`` (give or take
+        ``within_s``): within TRACK_SLACK_M plus MAX_SPEED_M_S of the plausible position of
+        its track nearest that time."""
+        if not self.track:
+            return False
+        made, where = min(self.track, key=lambda anchor: abs(anchor[0] - when))
+        reach = TRACK_SLACK_M + MAX_SPEED_M_S * (abs(when - made) + within_s)
+        return distance_m(point, where) <= reach
 
     def position_age(self, now: float) -> float:
         """Seconds since its position was taken."""

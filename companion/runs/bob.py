@@ -46,6 +46,9 @@ from protocol.paper.keys import BobKeys
 
 log = logging.getLogger("companion")
 SETUPS_PER_PEER = 2
+# A request's box is made this long at most before its first fragment reaches us (the
+# requester's listen-before-talk and the frame's own airtime).
+REQUEST_LEAD_S = 10.0
 
 
 class Responding(NamedTuple):
@@ -235,7 +238,8 @@ class BobAnswers:
             self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=str(exc)))
             return None
         operator = neighbour.operator
-        code = self._refusal(peer, hello, known, operator.max_segments)
+        began = self.clock.now() - (wall - self.endpoint.arrived(peer, session))
+        code = self._refusal(peer, hello, known, operator.max_segments, began)
         if code is not None:
             await self._refuse(peer, session, responder, code)
             return None
@@ -294,10 +298,13 @@ class BobAnswers:
             return False
         return True
 
-    def _refusal(self, peer: int, hello: Hello, known: Peer, max_segments: int) -> Refusal | None:
+    def _refusal(
+        self, peer: int, hello: Hello, known: Peer, max_segments: int, began: float
+    ) -> Refusal | None:
         """The checks on an authenticated request before any work, cheapest first: the role,
         a radio that is not free, the size (its beacon's, its operator's limit, a fair run's
-        work) and the box; the refusal, or None to go on."""
+        work) and the box (``began``: link time its first fragment reached us); the refusal,
+        or None to go on."""
         if known.role is Role.ALICE:
             if self.settings.node < peer:
                 # Both took the pair as Alice (their views of who was on the ground crossed):
@@ -315,15 +322,18 @@ class BobAnswers:
             # More than a fair run (m x n x grid bits): Bob's CPU, memory and first reply
             # grow with it, and a refused run costs the asker nothing.
             return Refusal.SIZE
-        if not self._plausible_box(hello, known):
+        if not self._plausible_box(hello, known, began):
             return Refusal.BOX
         return None
 
-    def _plausible_box(self, hello: Hello, known: Peer) -> bool:
-        """Alice's grid is centred where she is (her position when the run starts): within
-        what she can have flown since the last position her track of verified beacons makes
-        plausible (:attr:`Peer.anchor`: a beacon that jumps faster than ``MAX_SPEED_M_S``
-        moves no box), and within ``max_peer_range_m`` of us (a drone on our radio); it
+    def _plausible_box(self, hello: Hello, known: Peer, began: float) -> bool:
+        """Alice's grid is centred where she is when her request begins: within what she can
+        have flown since the last position her track of verified beacons makes plausible
+        (:attr:`Peer.anchor`: a beacon that jumps faster than ``MAX_SPEED_M_S`` moves no
+        box), or, as that request may take a minute to reach us whole on a busy channel,
+        where that track had her when its first fragment arrived (``began``, give or take
+        ``REQUEST_LEAD_S``: :meth:`Peer.plausible_at`); and within ``max_peer_range_m`` of us
+        (a drone on our radio); it
         reaches no further than ``max_box_radius_m`` and is no finer than
         ``min_grid_resolution_mm``.  Bob's path is
         cut to her box, so a box elsewhere -- or one centred on her that spans a continent --
@@ -341,7 +351,11 @@ class BobAnswers:
         centre = (grid.ref_lat_e7, grid.ref_lon_e7)
         if distance_m(centre, self.vehicle.position[:2]) > self.settings.max_peer_range_m:
             return False  # not where a drone we hear on our radio can be
-        return distance_m(centre, known.anchor[1]) <= known.reach_m(self.clock.now())
+        if distance_m(centre, known.anchor[1]) <= known.reach_m(self.clock.now()):
+            return True
+        # (a busy channel: ten drones' requests came 631-1003 m from her last beacon, each
+        # a whole wasted request and a late result)
+        return known.plausible_at(centre, began, REQUEST_LEAD_S)
 
     async def _refuse(self, peer: int, session: int, responder: Responder, code: Refusal) -> None:
         self.record(EventKind.REFUSED, PeerNote(peer=peer, reason=code.name))
