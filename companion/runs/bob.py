@@ -49,6 +49,10 @@ SETUPS_PER_PEER = 2
 # A request's box is made this long at most before its first fragment reaches us (the
 # requester's listen-before-talk and the frame's own airtime).
 REQUEST_LEAD_S = 10.0
+# A request's first frame may wait this long for a busy channel before it leaves (ten drones
+# on one US915 channel: 30-50 s, and the request was refused as stale after 30).  Replays
+# stay caught: the replay store keeps requests for twice the whole window.
+ACCESS_WAIT_S = 60.0
 
 
 class Responding(NamedTuple):
@@ -280,10 +284,11 @@ class BobAnswers:
         self, peer: int, session: int, responder: Responder, cert: Certificate, wall: float
     ) -> bool:
         """Signed by ``cert``, made when its first frame could have left (a duty-cycled
-        sender may wait up to a window for its budget) and answered once (the replay cache
-        on disk outlives the window); else aborted with a proof."""
+        sender may wait up to a window for its budget, any sender ACCESS_WAIT_S for a busy
+        channel) and answered once (the replay cache on disk outlives the window); else
+        aborted with a proof."""
         skew = self.settings.max_clock_skew_s
-        wait = self.endpoint.profile.budget_wait_s
+        wait = self.endpoint.profile.budget_wait_s + ACCESS_WAIT_S
         try:
             responder.verify(cert, self.endpoint.arrived(peer, session), skew, wait)
             forget = wall - 2 * (skew + wait)
