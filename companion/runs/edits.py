@@ -68,7 +68,7 @@ class Edits:
         self.peers = neighbourhood.peers
         self.autopilot = autopilot
         self._announce = announce
-        self.flagged: set[int] = set()  # segments the comparisons found in conflict
+        self.flagged: set[int] = set()  # segments in conflict at a verified edit, in the flight
         self.precaution: dict[int, set[int]] = {}  # peer -> segments climbed as a precaution
         self.holding: set[int] = set()  # peers we hold for
         # peer -> segments no raise within max_levels clears (conflicts or precautions): we
@@ -200,7 +200,9 @@ class Edits:
                 return
             self.flight.edited(new, raises, Edit(new, edit.origin, edit.inserted), mark, sent_at)
             self._announce()  # peers keep clear of our slots: tell them now, not in minutes
-            self.flagged = {k for p in self.peers.values() for k in p.conflicts}
+            # (every segment flagged at a verified edit: a later run from where the drone is,
+            # past the conflict, clears it and the raise may be flown back down)
+            self.flagged |= {k for p in self.peers.values() for k in p.conflicts}
             self.ctx.record(
                 EventKind.UPLOADED,
                 Uploaded(

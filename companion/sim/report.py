@@ -56,7 +56,7 @@ class DroneReport:
     vehicle: str  # "mock" or "px4-sitl"
     segments: int
     conflicting_segments: list[int]  # the plain predicate against every trusted peer
-    flagged_segments: list[int]  # what the companion's runs flagged
+    flagged_segments: list[int]  # what the runs flagged, at a verified edit of the flight
     raises: dict[str, float]  # segment -> metres higher, as uploaded
     edits: list[Detail]
     edit: EditStatus
