@@ -51,11 +51,10 @@ class Peer:
     measured: bool = False  # range_rate comes from two beacons
     made_at: float | None = None  # link time its beacon's position was taken (its stamp)
     met_at: float = 0.0  # link time it became a peer
-    # (link time, position) of its last position that its track makes plausible: within
-    # TRACK_SLACK_M plus MAX_SPEED_M_S since the anchor before.  A run's box is checked
-    # against it (companion.runs.bob), not against a claim out of nowhere.
-    anchor: tuple[float, tuple[int, int]] | None = None
-    # the anchors before it, oldest first (TRACK_KEPT at most): where it was when
+    # (link time, position) of its last TRACK_KEPT positions that its track makes plausible,
+    # oldest first: each within TRACK_SLACK_M plus MAX_SPEED_M_S since the one before.  A
+    # run's box is checked against them (companion.runs.bob), not against a claim out of
+    # nowhere.
     track: list[tuple[float, tuple[int, int]]] = field(default_factory=list)
 
     @property
@@ -100,8 +99,12 @@ class Peer:
         self.beacon, self.heard_at, self.made_at = beacon, now, made
         here = (beacon.lat, beacon.lon)
         if self.anchor is None or distance_m(self.anchor[1], here) <= self.reach_m(made):
-            self.anchor = (made, here)
-            self.track = [*self.track[1 - TRACK_KEPT :], self.anchor]
+            self.track = [*self.track[1 - TRACK_KEPT :], (made, here)]
+
+    @property
+    def anchor(self) -> tuple[float, tuple[int, int]] | None:
+        """Its last plausible position (link time, position), None before any."""
+        return self.track[-1] if self.track else None
 
     def reach_m(self, now: float) -> float:
         """How far from its anchor it may plausibly be at ``now`` (link time)."""

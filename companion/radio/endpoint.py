@@ -181,11 +181,14 @@ class LinkEndpoint:
             raise item
         return item
 
+    def arrived_at(self, peer: int, session: int) -> float:
+        """When (link time) the first fragment of a session the peer opened reached us."""
+        return self._session(peer, session).arrived
+
     def arrived(self, peer: int, session: int) -> float:
-        """When (Unix seconds, :meth:`Clock.wall`) the first fragment of a session the peer
-        opened reached us: what a request's own time is checked against (its transfer may
-        take long)."""
-        return self.clock.wall() - (self.clock.now() - self._session(peer, session).arrived)
+        """:meth:`arrived_at` in Unix seconds (:meth:`Clock.wall`): what a request's own time
+        is checked against (its transfer may take long)."""
+        return self.clock.wall() - (self.clock.now() - self.arrived_at(peer, session))
 
     def close_session(self, peer: int, session: int) -> None:
         """Forget a session: its buffers are freed, late frames are ignored."""

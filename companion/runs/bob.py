@@ -242,7 +242,7 @@ class BobAnswers:
             self.record(EventKind.ANSWER_FAILED, PeerFailure(peer=peer, error=str(exc)))
             return None
         operator = neighbour.operator
-        began = self.clock.now() - (wall - self.endpoint.arrived(peer, session))
+        began = self.endpoint.arrived_at(peer, session)
         code = self._refusal(peer, hello, known, operator.max_segments, began)
         if code is not None:
             await self._refuse(peer, session, responder, code)

@@ -223,11 +223,11 @@ class Edits:
         again HOLD_RECHECK_S after each result."""
         start = self.flight.remaining_path()[0]
         wanted: dict[int, set[int]] = {}
-        timed = self.settings.offset.max_levels is not None and not self.unbounded
-        for node, peer in self.peers.items() if timed else ():
-            segments = (peer.conflicts | self.precaution.get(node, set())) & set(unresolved)
-            if ahead := {k for k in segments if k >= start}:
-                wanted[node] = ahead
+        if self.settings.offset.max_levels is not None and not self.unbounded:
+            for node, peer in self.peers.items():
+                segments = (peer.conflicts | self.precaution.get(node, set())) & set(unresolved)
+                if ahead := {k for k in segments if k >= start}:
+                    wanted[node] = ahead
         for node in [n for n in self.time_holds if n not in wanted]:
             del self.time_holds[node]
             if node in self.peers:
@@ -268,7 +268,7 @@ class Edits:
                 bands,
                 offset.offset_m,
                 self.settings.separation.vertical_m,
-                1.0 if offset.direction == "up" else -1.0,
+                1.0 if up else -1.0,
                 keep_clear=clear_of,
                 headroom=headroom if up or math.isfinite(cap) else None,
             )
