@@ -229,6 +229,12 @@ def _add_bench(sub: Subparsers) -> None:
     bench.add_argument(
         "--range", type=cli.integer(1, 1 << 28), default=99, help="coordinate range of the 8x8 run"
     )
+    bench.add_argument(
+        "--pairs",
+        type=cli.integer(1, 30),
+        default=None,
+        help="run only the first N of the 30 pairs (a quick look; default: all)",
+    )
     bench.add_argument("--json", action="store_true", help="machine-readable output")
     bench.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     bench.set_defaults(func=commands.bench_link)

@@ -97,6 +97,7 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("plan-missing", C, ["mission", "show", "{d}/missing.plan"], "missing.plan: does not exist"),
     ("plan-dir", C, ["mission", "show", "{d}/adir"], "adir: is a directory"),
     ("profiles", C, ["bench-link", "--profiles", "bogus"], "unknown link profile 'bogus'"),
+    ("bench-pairs", C, ["bench-link", "--pairs", "0"], "--pairs: 0 is out of range"),
     ("compare-link", C, ["compare", "{d}/paths.txt", "{d}/paths.txt", "--link", "x"], "--link"),
     (
         "compare-mtu",

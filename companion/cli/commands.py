@@ -322,7 +322,12 @@ def bench_link(args: argparse.Namespace) -> int:
 
     profiles = list(args.profiles) if args.profiles else None
     result = bench_link(
-        args.data, profiles, suite=args.suite, range_=args.range, progress=not args.quiet
+        args.data,
+        profiles,
+        suite=args.suite,
+        range_=args.range,
+        pairs=args.pairs,
+        progress=not args.quiet,
     )
     print(json.dumps(result, indent=2) if args.json else format_link(result))
     return 0

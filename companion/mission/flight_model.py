@@ -384,6 +384,47 @@ class Flight:
         last = self.reached[-1]
         self.reached[-1] = Reached(last.item, last.t, last.alt, self.t)
 
+    def _cruise(self, dt: float, most: int) -> bool:
+        """Up to ``most`` steps of ``dt`` at once where they are all alike -- a waypoint leg
+        flown at its steady speed (no speeding up, not yet slowing down for the waypoint, the
+        ramp linear in the distance): what :meth:`step` would fly, in one move.  A
+        prediction spends nearly all its steps there (False: nothing skipped)."""
+        k, leg = self.kinematics, self._leg
+        if leg is None or self._lift_at is not None or not self.mission_running or most < 2:
+            return False
+        index, target, _, _, alt0, length = leg
+        if index != self.current or self.current >= len(self.items):
+            return False
+        item = self.items[self.current]
+        if item.command != NAV_WAYPOINT or not item.has_position or length <= k.acceptance_m:
+            return False
+        if (self.home_is_item0 and self.current == 0) or target != self.target(self.current):
+            return False
+        north, east = ground_offset(self.lat, self.lon, target[0], target[1])
+        dist = math.hypot(north, east)
+        steady = k.flown(self.cruise)
+        ramp = abs(target[2] - alt0)
+        if ramp > 0:
+            steady = min(
+                steady, (k.climb_m_s if target[2] > alt0 else k.descend_m_s) * length / ramp
+            )
+        if abs(self.speed - steady) > 1e-9 or steady < 0.3:
+            return False
+        exit_speed = self._exit_speed(index, target)
+        slowing = (steady**2 - exit_speed**2) / (2 * k.accel_m_s2)  # where the speed limit bites
+        each = steady * dt
+        # every skipped step starts where its distance still allows the steady speed, and
+        # ends beyond the waypoint's acceptance radius (with a step to spare)
+        steps = min(most, int((dist - max(slowing, k.acceptance_m + each)) / each))
+        if steps < 2:
+            return False
+        self.t += steps * dt
+        self._move(north, east, dist, steps * each)
+        left = dist - steps * each
+        self.alt = target[2] + (alt0 - target[2]) * (left / length)
+        self.vz = 0.0
+        return True
+
     # ------------------------------------------------------------------ prediction
 
     def predict(self, dt: float = 0.5, limit_s: float = MAX_PREDICTION_S) -> list[Reached]:
@@ -398,7 +439,8 @@ class Flight:
             future.start()
         end = self.t + limit_s
         while future.flying and future.mission_running and future.t < end:
-            future.step(dt)
+            if not future._cruise(dt, int((end - future.t) / dt)):
+                future.step(dt)
             if (
                 future.reached
                 and future.reached[-1].left is None

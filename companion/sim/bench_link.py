@@ -70,10 +70,12 @@ def bench_link(
     range_: int = 99,
     seed: int = 1,
     progress: bool = True,
+    pairs: int | None = None,
 ) -> dict[str, Any]:
-    """The paper's 30 pairs from ``data`` (or 30 random pairs in +-99 without it) and one
-    size x size random case over each profile and loss."""
-    pairs = load_paper_data(data).pairs if data is not None else random_pairs()
+    """The paper's 30 pairs from ``data`` (or 30 random pairs in +-99 without it; the first
+    ``pairs`` of them if given) and one size x size random case over each profile and loss."""
+    cases = load_paper_data(data).pairs if data is not None else random_pairs()
+    cases = cases[:pairs] if pairs is not None else cases
     kind = "paper pair" if data is not None else "random pair"
     profiles = list(profiles or PROFILES)
     for name in profiles:
@@ -88,14 +90,14 @@ def bench_link(
         for loss in losses:
             imp = Impairments(loss=loss)
             _say(progress, f"{name}, loss {loss:.0%}: {kind}s")
-            runs = [link_case(c, party, link, imp, seed + k) for k, c in enumerate(pairs)]
+            runs = [link_case(c, party, link, imp, seed + k) for k, c in enumerate(cases)]
             rows.append(_row(name, loss, kind, runs))
             if party.setup is not None:  # two drones that never met: a fresh OT setup
                 _say(progress, f"{name}, loss {loss:.0%}: {kind}s, first contact")
                 fresh = dataclasses.replace(party, setup=None, setups={})
                 runs = [
                     link_case(c, dataclasses.replace(fresh, setups={}), link, imp, seed + k)
-                    for k, c in enumerate(pairs)
+                    for k, c in enumerate(cases)
                 ]
                 rows.append(_row(name, loss, f"{kind}, first contact", runs))
             _say(progress, f"{name}, loss {loss:.0%}: {size} x {size} paths")
@@ -104,7 +106,9 @@ def bench_link(
             )
     return {
         "suite": suite,
-        "pairs_from": str(data) if data is not None else f"{len(pairs)} random pairs in +-99",
+        "pairs_from": f"{len(cases)} random pairs in +-99"
+        if data is None
+        else str(data) + ("" if pairs is None else f", its first {len(cases)} pairs"),
         "profiles": {
             n: {
                 "description": PROFILES[n].description,

@@ -24,6 +24,7 @@ from companion.sim.mock_autopilot import FlightModel, MockAutopilot
 from companion.sim.vehicles import MockVehicle
 
 ON_CHANGE_S = 0.5  # link seconds between looks at a state reported on change (armed, ...)
+PARKED_S = 1.0  # ... and between positions and looks while the vehicle is parked (disarmed)
 T = TypeVar("T")
 
 
@@ -64,8 +65,11 @@ class InProcessAutopilot(AutopilotBase):
         mock = self.mock
         while True:
             yield Position(mock.lat, mock.lon, mock.home[2] + mock.alt, mock.alt)
-            parked = not (mock.armed or mock.flying)
-            await self.clock.sleep(max(1.0 / rate_hz, 1.0) if parked else 1.0 / rate_hz)
+            await self.clock.sleep(max(1.0 / rate_hz, PARKED_S) if self._parked else 1.0 / rate_hz)
+
+    @property
+    def _parked(self) -> bool:
+        return not (self.mock.armed or self.mock.flying)
 
     async def _on_change(self, state: Callable[[], T]) -> AsyncIterator[T]:
         last: object = object()
@@ -74,7 +78,7 @@ class InProcessAutopilot(AutopilotBase):
             if now != last:
                 last = now
                 yield now
-            await self.clock.sleep(ON_CHANGE_S)
+            await self.clock.sleep(PARKED_S if self._parked else ON_CHANGE_S)
 
     def armed_states(self) -> AsyncIterator[bool]:
         return self._on_change(lambda: self.mock.armed)

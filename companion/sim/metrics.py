@@ -62,37 +62,62 @@ TIMELINE = frozenset(
 )
 
 
-def _aligned(a: Track, b: Track) -> list[tuple[float, float, float, float]]:
-    """(t, dt, horizontal m, vertical m) at each sample of ``a``, against ``b`` at the
-    nearest time (both tracks are sampled finely in simulated time)."""
-    out: list[tuple[float, float, float, float]] = []
+class Local:
+    """Tracks on the tangent plane at ``ref`` (lat, lon): (t, north, east, up) for each
+    sample, projected once per track (a replay's pairs share them; the tangent plane's
+    distortion is under a millimetre within a few kilometres of ``ref``)."""
+
+    def __init__(self, ref: tuple[float, float]) -> None:
+        self.ref = ref
+        self._done: dict[int, tuple[Track, list[tuple[float, float, float, float]]]] = {}
+
+    def of(self, track: Track) -> list[tuple[float, float, float, float]]:
+        kept = self._done.get(id(track))
+        if kept is not None and kept[0] is track:
+            return kept[1]
+        lat0, lon0 = self.ref
+        out = [(t, *ground_offset(lat0, lon0, lat, lon), alt) for t, lat, lon, alt in track]
+        self._done[id(track)] = (track, out)
+        return out
+
+
+def _aligned(
+    a: Track, b: Track, local: Local | None = None
+) -> list[tuple[int, int, float, float, float]]:
+    """(index in a, index in b, horizontal m, vertical m, dt) at each sample of ``a``,
+    against ``b`` at the nearest time (both tracks are sampled finely in simulated time)."""
+    out: list[tuple[int, int, float, float, float]] = []
     if not a or not b:
         return out
+    local = local or Local((a[0][1], a[0][2]))
+    la, lb = local.of(a), local.of(b)
     j = 0
     previous = a[0][0]
-    for t, lat, lon, alt in a:
-        while j + 1 < len(b) and abs(b[j + 1][0] - t) <= abs(b[j][0] - t):
+    for i, (t, north, east, up) in enumerate(la):
+        while j + 1 < len(lb) and abs(lb[j + 1][0] - t) <= abs(lb[j][0] - t):
             j += 1
-        north, east = ground_offset(lat, lon, b[j][1], b[j][2])
-        out.append((t, t - previous, math.hypot(north, east), abs(alt - b[j][3])))
+        q = lb[j]
+        out.append((i, j, math.hypot(north - q[1], east - q[2]), abs(up - q[3]), t - previous))
         previous = t
     return out
 
 
-def intrusion(a: Track, b: Track, horizontal_m: float, vertical_m: float) -> tuple[float, float]:
+def intrusion(
+    a: Track, b: Track, horizontal_m: float, vertical_m: float, local: Local | None = None
+) -> tuple[float, float]:
     """Seconds the two were inside each other's protected volume (horizontally closer than
     ``horizontal_m`` and vertically than ``vertical_m``), and when they first were (inf:
     never)."""
     inside, first = 0.0, math.inf
-    for t, dt, h, v in _aligned(a, b):
+    for i, _, h, v, dt in _aligned(a, b, local):
         if h < horizontal_m and v < vertical_m:
             inside += dt
-            first = min(first, t)
+            first = min(first, a[i][0])
     return inside, first
 
 
 def closest(
-    a: Track, b: Track
+    a: Track, b: Track, local: Local | None = None
 ) -> tuple[float, float, tuple[float, float, float], tuple[float, float, float]]:
     """(distance, time, point a, point b) of the closest approach of two trajectories."""
     best: tuple[float, float, tuple[float, float, float], tuple[float, float, float]] = (
@@ -101,16 +126,11 @@ def closest(
         (0.0, 0.0, 0.0),
         (0.0, 0.0, 0.0),
     )
-    if not a or not b:
+    found = min(_aligned(a, b, local), key=lambda s: math.hypot(s[2], s[3]), default=None)
+    if found is None:
         return best
-    j = 0
-    for t, lat, lon, alt in a:
-        while j + 1 < len(b) and abs(b[j + 1][0] - t) <= abs(b[j][0] - t):
-            j += 1
-        d = math.dist(enu((lat, lon, alt), (a[0][1], a[0][2])), enu(b[j][1:], (a[0][1], a[0][2])))
-        if d < best[0]:
-            best = (d, t, (lat, lon, alt), b[j][1:])
-    return best
+    i, j, h, v, _ = found
+    return math.hypot(h, v), a[i][0], a[i][1:], b[j][1:]
 
 
 FAR_M = 500.0  # a busy sky's pairs that never came this close are not compared exactly
@@ -203,9 +223,10 @@ def build_report(
         drones.append(_drone_report(d, companions[d.id], mocks[d.id], held[d.id], plain))
     ids = [d.id for d in scenario.drones]
     screen = Screen((first.home[0], first.home[1])) if len(ids) > SCREEN_FROM else None
+    local = Local((first.home[0], first.home[1]))
     pairs = [
         _pair_report(
-            scenario, specs[a], specs[b], paths, capsule, mocks, baseline, companions, screen
+            scenario, specs[a], specs[b], paths, capsule, mocks, baseline, companions, screen, local
         )
         for i, a in enumerate(ids)
         for b in ids[i + 1 :]
@@ -298,6 +319,7 @@ def _pair_report(
     baseline: dict[int, Track],
     companions: dict[int, Companion],
     screen: Screen | None,
+    local: Local,
 ) -> PairReport:
     """One pair: did their protected volumes meet without the companions (a conflict), and
     with them; did they act, in time, and was it enough.  With a ``screen`` (a busy sky) a
@@ -313,10 +335,10 @@ def _pair_report(
         with_companion, when, without = far, 0.0, far_baseline
         inside_before, met, inside_after = 0.0, math.inf, 0.0
     else:
-        with_companion, when, _, _ = closest(flown_a, flown_b)
-        without, _, _, _ = closest(baseline[a], baseline[b])
-        inside_before, met = intrusion(baseline[a], baseline[b], r, v)
-        inside_after, _ = intrusion(flown_a, flown_b, r, v - tolerance)
+        with_companion, when, _, _ = closest(flown_a, flown_b, local)
+        without, _, _, _ = closest(baseline[a], baseline[b], local)
+        inside_before, met = intrusion(baseline[a], baseline[b], r, v, local)
+        inside_after, _ = intrusion(flown_a, flown_b, r, v - tolerance, local)
     trusted = scenario.trusted_pair(da, db)
     conflict = inside_before > 0
     # a pair with an operator outside the trust store is deliberately not deconflicted

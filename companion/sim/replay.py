@@ -60,6 +60,7 @@ log = logging.getLogger(__name__)
 PX4_SPEED_MAX = 5.0
 VIRTUAL_RATE_HZ = 5.0  # a virtual replay's vehicles step (and report) this often
 VIRTUAL_LOOK_S = 0.2  # and the schedule (take-offs, holds, the end) is looked at this often
+PARKED_LOOK_S = 1.0  # ... or this often while none flies (hours on the ground: lossy_sf9)
 
 
 @dataclass(frozen=True)
@@ -274,9 +275,23 @@ class _Script:
                 self.say(f"t={sim:.0f} s: {'all missions flown' if done else 'time limit'}")
                 return done
             if virtual:
-                await clock.sleep(VIRTUAL_LOOK_S)
+                await clock.sleep(self._look_s(sim))
             else:
                 await asyncio.sleep(0.01)
+
+    def _look_s(self, sim: float) -> float:
+        """Until the next look at the schedule (virtual time): soon while any vehicle
+        flies, else at the next thing due (a take-off, a companion powering up or off, a
+        pause) within a second."""
+        if any(v.flying for v in self.vehicles.values()):
+            return VIRTUAL_LOOK_S
+        due = [
+            t
+            for d in self.scenario.drones
+            for t in (d.takeoff_delay_s, d.companion_start_s, d.companion_stop_s)
+            if t is not None and t > sim
+        ]
+        return max(min([PARKED_LOOK_S, *(t - sim for t in due)]), 0.0)
 
     async def step(self, sim: float) -> None:
         for ident, companion in self.companions.items():

@@ -72,11 +72,12 @@ def test_compare_table_and_bad_profile(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_bench_link_rows(paper_shaped: PaperShaped) -> None:
-    """The paper's 30 pairs from a data directory (here the project's of their shape), on one
-    profile at two losses (the ideal profile runs in the test below: the suite's time)."""
+    """The paper's pairs from a data directory (here the project's of their shape; the first
+    10 of 30: the suite's time), on one profile at two losses (the ideal profile runs in the
+    test below)."""
     data = paper_shaped.directory
-    result = bench_link(data, ["us915-sf9"], (0.0, 0.3), size=2, progress=False)
-    assert result["pairs_from"] == str(data)
+    result = bench_link(data, ["us915-sf9"], (0.0, 0.3), size=2, progress=False, pairs=10)
+    assert result["pairs_from"] == f"{data}, its first 10 pairs"
     rows = result["rows"]
     assert len(rows) == 2 * 3  # losses x (paper pair, first contact, 2x2)
     for row in rows:
@@ -91,7 +92,7 @@ def test_bench_link_rows(paper_shaped: PaperShaped) -> None:
     for key, row in first.items():  # the OT setup travels too
         assert row["frames_sent"] > paper[key]["frames_sent"]
     table = format_link(result)
-    assert "| us915-sf9 | 30% | paper pair | 30/30 |" in table
+    assert "| us915-sf9 | 30% | paper pair | 10/10 |" in table
     for row in rows:  # authenticated runs: key exchange (109 + 129 B) and a tag per message
         assert row["auth_bytes"] >= 109 + 129 + 16
     sf9 = {c["kind"]: c for c in result["beacons"]["us915-sf9"]}
@@ -101,13 +102,14 @@ def test_bench_link_rows(paper_shaped: PaperShaped) -> None:
 
 @pytest.mark.slow
 def test_bench_link_without_data_runs_random_pairs() -> None:
-    """Without ``--data`` the benchmark runs 30 random pairs of the paper's shape and says so."""
-    result = bench_link(None, ["ideal"], (0.0,), size=1, progress=False)
-    assert result["pairs_from"] == "30 random pairs in +-99"
+    """Without ``--data`` the benchmark runs random pairs of the paper's shape (30, here the
+    first 12) and says so."""
+    result = bench_link(None, ["ideal"], (0.0,), size=1, progress=False, pairs=12)
+    assert result["pairs_from"] == "12 random pairs in +-99"
     rows = {r["workload"]: r for r in result["rows"]}
     assert set(rows) == {"random pair", "random pair, first contact", "1x1"}
-    assert rows["random pair"]["runs"] == rows["random pair"]["correct"] == 30
-    assert "a random pair (30 random pairs in +-99) is one 1 x 1" in format_link(result)
+    assert rows["random pair"]["runs"] == rows["random pair"]["correct"] == 12
+    assert "a random pair (12 random pairs in +-99) is one 1 x 1" in format_link(result)
 
 
 def test_authentication_adds_the_key_exchange_and_a_tag_per_message(
