@@ -5,17 +5,20 @@ whether a conflict was resolved by the companions' action -- made into the typed
 
 A pair is in *conflict* when, without the companions, the two drones came inside each other's
 protected volume: horizontally closer than ``separation_m`` and vertically closer than
-``vertical_separation_m`` at the same moment (whether their tracks cross or not).  It is
-*resolved* when a companion acted for it (a precaution, or a verified edit flying higher a
-segment a run flagged for that peer) before they would have met, and with the companions they
-never came inside (vertically: less the vehicles' altitude accuracy).  An edit or precaution
-for a pair that never came inside without the companions is a *false alarm*; a pair the
-companions brought closer, and inside, is *made worse*.
+``vertical_separation_m`` at the same moment, both in the air (whether their tracks cross or
+not).  It is *resolved* when a companion acted for it (a precaution, or a verified edit flying
+higher a segment a run flagged for that peer) before they would have met, either drone flew
+differently from its baseline (:data:`DEVIATED_M`), and with the companions they never came
+inside (vertically: less the vehicles' altitude accuracy).  An edit or precaution for a pair
+that never came inside without the companions is a *false alarm*; a pair the companions
+brought closer, and inside, with either drone flying differently, is *made worse*.
 """
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 
 from companion.app.runtime import Companion
 from companion.events import RUN_ENDS, Answered, Precaution, RunResult, Stranger, Uploaded
@@ -103,17 +106,31 @@ def _aligned(
 
 
 def intrusion(
-    a: Track, b: Track, horizontal_m: float, vertical_m: float, local: Local | None = None
+    a: Track,
+    b: Track,
+    horizontal_m: float,
+    vertical_m: float,
+    local: Local | None = None,
+    grounds: tuple[float, float] | None = None,
 ) -> tuple[float, float]:
     """Seconds the two were inside each other's protected volume (horizontally closer than
     ``horizontal_m`` and vertically than ``vertical_m``), and when they first were (inf:
-    never)."""
+    never).  With ``grounds`` (each one's home altitude, AMSL) only while both are in the air:
+    two drones parked on pads a few metres apart are no traffic."""
     inside, first = 0.0, math.inf
-    for i, _, h, v, dt in _aligned(a, b, local):
-        if h < horizontal_m and v < vertical_m:
+    low_a, low_b = (-math.inf, -math.inf) if grounds is None else (g + AIRBORNE_M for g in grounds)
+    for i, j, h, v, dt in _aligned(a, b, local):
+        if h < horizontal_m and v < vertical_m and a[i][3] > low_a and b[j][3] > low_b:
             inside += dt
             first = min(first, a[i][0])
     return inside, first
+
+
+def deviation(flown: Track, baseline: Track, local: Local | None = None) -> float:
+    """The farthest a drone's flown track came from its baseline's at the same moment
+    (metres, 3-D): what tells a drone that flew differently (a raise, a hold) from one
+    whose replay differs from its baseline only by the simulation's timing."""
+    return max((math.hypot(h, v) for *_, h, v, _ in _aligned(flown, baseline, local)), default=0.0)
 
 
 def closest(
@@ -133,6 +150,13 @@ def closest(
     return math.hypot(h, v), a[i][0], a[i][1:], b[j][1:]
 
 
+AIRBORNE_M = 0.5  # above its home: in the air
+# A drone's flown track this far from its baseline's at the same moment flew differently (a
+# raise is 10 m, a hold more); less is the simulation's own timing: the replay's vehicles
+# step at 5 Hz and its baseline's at 10 Hz, and a take-off command lands between two steps
+# (0.2 s at 8 m/s: 1.6 m; pairs closing head-on differed by 2-3 m in closest approach
+# with neither drone flying anything but its original mission on time)
+DEVIATED_M = 5.0
 FAR_M = 500.0  # a busy sky's pairs that never came this close are not compared exactly
 SCREEN_FROM = 10  # drones: a replay with more has its far pairs screened out
 
@@ -224,9 +248,24 @@ def build_report(
     ids = [d.id for d in scenario.drones]
     screen = Screen((first.home[0], first.home[1])) if len(ids) > SCREEN_FROM else None
     local = Local((first.home[0], first.home[1]))
+
+    @functools.cache
+    def changed(ident: int) -> bool:
+        return deviation(mocks[ident].trajectory, baseline[ident], local) > DEVIATED_M
+
     pairs = [
         _pair_report(
-            scenario, specs[a], specs[b], paths, capsule, mocks, baseline, companions, screen, local
+            scenario,
+            specs[a],
+            specs[b],
+            paths,
+            capsule,
+            mocks,
+            baseline,
+            companions,
+            screen,
+            local,
+            changed,
         )
         for i, a in enumerate(ids)
         for b in ids[i + 1 :]
@@ -320,6 +359,7 @@ def _pair_report(
     companions: dict[int, Companion],
     screen: Screen | None,
     local: Local,
+    changed: Callable[[int], bool],
 ) -> PairReport:
     """One pair: did their protected volumes meet without the companions (a conflict), and
     with them; did they act, in time, and was it enough.  With a ``screen`` (a busy sky) a
@@ -335,10 +375,11 @@ def _pair_report(
         with_companion, when, without = far, 0.0, far_baseline
         inside_before, met, inside_after = 0.0, math.inf, 0.0
     else:
+        grounds = (da.home[2], db.home[2])
         with_companion, when, _, _ = closest(flown_a, flown_b, local)
         without, _, _, _ = closest(baseline[a], baseline[b], local)
-        inside_before, met = intrusion(baseline[a], baseline[b], r, v, local)
-        inside_after, _ = intrusion(flown_a, flown_b, r, v - tolerance, local)
+        inside_before, met = intrusion(baseline[a], baseline[b], r, v, local, grounds)
+        inside_after, _ = intrusion(flown_a, flown_b, r, v - tolerance, local, grounds)
     trusted = scenario.trusted_pair(da, db)
     conflict = inside_before > 0
     # a pair with an operator outside the trust store is deliberately not deconflicted
@@ -354,8 +395,11 @@ def _pair_report(
         paths_near=any(route_hits(Route(paths[a]), Route(paths[b]), capsule)),
         conflict=conflict,
         acted=acted,
-        resolved=conflict and acted and inside_after == 0,
-        made_worse=with_companion < without - tolerance and inside_after > 0,
+        # what the companions made of a pair needs either drone to have flown differently
+        resolved=conflict and acted and inside_after == 0 and (changed(a) or changed(b)),
+        made_worse=with_companion < without - tolerance
+        and inside_after > 0
+        and (changed(a) or changed(b)),
         false_alarm=ever and not conflict,
         closest_approach_m=round(with_companion, 2),
         closest_approach_t_s=round(when, 1),

@@ -7,8 +7,10 @@ import asyncio
 import itertools
 import logging
 import math
+import shutil
 import statistics
 import tempfile
+import weakref
 from pathlib import Path
 
 import pytest
@@ -87,6 +89,7 @@ def alone(
         autopilot,  # type: ignore[arg-type]
         make_fleet([(1, "fleet")], state)[1],
     )
+    weakref.finalize(c, shutil.rmtree, state, ignore_errors=True)  # (at exit at the latest)
     c.flight.load(list(items), None)
     return c, autopilot
 
