@@ -25,6 +25,11 @@ from companion.state import StateStore
 
 HOLD_NODE_S = 120.0  # a node id stays with its drone this long after it was last heard
 NO_CERTIFICATE = "no certificate"
+NO_TAG = "no tag for us"
+# It tagged for us before under the same keys, so it has our beacon key: it has only not
+# heard us lately (its tags are for neighbours heard within the silence period) -- any beacon
+# of ours will do, no signed one needed.  Once only: a second beacon without it asks again.
+UNHEARD = "no tag for us lately"
 
 
 class Heard(enum.Enum):
@@ -49,6 +54,8 @@ class Neighbour:
     send_key: bytes | None = None  # our tags for it
     receive_key: bytes | None = None  # its tags for us
     knows_us: bool = False  # a tagged beacon of its carried a tag for us: it has our key
+    tagged_us: bool = False  # one of its beacons under its present key did (knows_us once)
+    untagged: int = 0  # its beacons without a tag for us since the last with one
 
     @property
     def fingerprint(self) -> bytes:
@@ -129,9 +136,12 @@ class Neighbours:
         elif known.receive_key is None:
             return Hearing(Heard.UNKNOWN, src, reason="no beacon key")
         elif not decoded.tagged_for(src, known.receive_key):
-            # no tag for us: it lacks our beacon key (or a forger): ask, do not use it
+            # no tag for us: it lacks our beacon key or has not heard us lately (or a
+            # forger): ask, do not use it
             known.knows_us = False
-            return Hearing(Heard.UNKNOWN, src, reason="no tag for us")
+            known.untagged += 1
+            lately = known.tagged_us and known.untagged == 1
+            return Hearing(Heard.UNKNOWN, src, reason=UNHEARD if lately else NO_TAG)
         else:
             mine = True
         beacon = decoded.beacon
@@ -152,6 +162,9 @@ class Neighbours:
             known.send_key, known.receive_key = pair
             known.beacon_key, new_keys = decoded.beacon_key, True
             known.knows_us = decoded.tagged_for(src, known.receive_key)
+            known.tagged_us = False  # (a new key of its: it may lack ours)
+        if known.knows_us:
+            known.tagged_us, known.untagged = True, 0
         if isinstance(decoded, SignedBeacon):
             known.keys_hash = decoded.keys_hash
         return Hearing(Heard.POSITION, src, beacon, known, new_keys=new_keys)

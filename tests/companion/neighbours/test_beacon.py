@@ -27,7 +27,7 @@ from companion.neighbours.beacon import (
     keys_hash,
     size_class,
 )
-from companion.neighbours.registry import Heard, Neighbours
+from companion.neighbours.registry import NO_TAG, UNHEARD, Heard, Neighbours
 from companion.state import StateStore
 from protocol.messages import Suite
 
@@ -104,6 +104,31 @@ def test_two_drones_meet_and_check_each_other(pair: tuple[Drone, Drone]) -> None
     got = a.neighbours.hear(2, b.tagged(beacon(counter=2)), NOW)
     assert got.kind is Heard.POSITION and got.neighbour is not None and got.neighbour.knows_us
     assert b.neighbours.hear(1, a.tagged(beacon(counter=3)), NOW + 1).kind is Heard.POSITION
+
+
+def test_a_neighbour_that_tagged_us_before_has_only_not_heard_us_lately(
+    pair: tuple[Drone, Drone], tmp_path: Path
+) -> None:
+    """A's beacon without a tag for B after one with it: A has B's key but has not heard B
+    within its silence period (UNHEARD: a tagged beacon of B's will do) -- once; a second
+    such beacon, or one from a drone that never tagged for B, asks for a signed one."""
+    a, b = pair
+    a.neighbours.hear(2, b.cert_beacon(), NOW)
+    a.neighbours.hear(2, b.signed(beacon()), NOW)
+    b.neighbours.hear(1, a.cert_beacon(), NOW)
+    assert b.neighbours.hear(1, a.signed(beacon()), NOW).kind is Heard.POSITION
+    assert b.neighbours.hear(1, a.tagged(beacon(counter=1)), NOW).kind is Heard.POSITION
+    untagged = beacon(counter=2).tagged(1, [])  # A heard nobody lately: no tags
+    assert b.neighbours.hear(1, untagged, NOW).reason == UNHEARD
+    assert b.neighbours.hear(1, beacon(counter=3).tagged(1, []), NOW).reason == NO_TAG
+    assert b.neighbours.hear(1, a.tagged(beacon(counter=4)), NOW).kind is Heard.POSITION
+    assert b.neighbours.hear(1, beacon(counter=5).tagged(1, []), NOW).reason == UNHEARD
+    # to a B that never had a tag from A (a fresh start), A lacks B's key: a signed beacon
+    # of B's is needed
+    again = Neighbours(b.neighbours.trust, StateStore(tmp_path / "again"), b.cert, b.keys)
+    again.hear(1, a.cert_beacon(), NOW)
+    assert again.hear(1, a.signed(beacon(counter=6)), NOW).kind is Heard.POSITION
+    assert again.hear(1, beacon(counter=7).tagged(1, []), NOW).reason == NO_TAG
 
 
 def test_forged_stale_and_replayed_beacons_are_dropped(pair: tuple[Drone, Drone]) -> None:
