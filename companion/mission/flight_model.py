@@ -322,24 +322,49 @@ class Flight:
                 )
             return abs(target[2] - self.alt) <= 0.1
         exit_speed = self._exit_speed(index, target) if index >= 0 else 0.0
-        wanted = min(k.flown(self.cruise), math.sqrt(exit_speed**2 + 2 * k.accel_m_s2 * dist))
-        ramp = abs(target[2] - alt0)
-        if ramp > 0:  # the straight 3-D line: climb or descend no faster than allowed
-            limit = k.climb_m_s if target[2] > alt0 else k.descend_m_s
-            wanted = min(wanted, limit * length / ramp)
+        wanted = min(
+            self._steady_m_s(target, alt0, length),
+            math.sqrt(exit_speed**2 + 2 * k.accel_m_s2 * dist),
+        )
         wanted = max(wanted, 0.3)  # never stall short of the point
         change = k.accel_m_s2 * dt
         self.speed += max(-change, min(change, wanted - self.speed))
-        step = min(dist, self.speed * dt)
-        self._move(north, east, dist, step)
-        left = max(dist - step, 0.0)
-        self.alt = target[2] + (alt0 - target[2]) * (left / length)
-        self.vz = 0.0
+        left = self._along(north, east, dist, min(dist, self.speed * dt), target, alt0, length)
         if left <= k.acceptance_m:
             if exit_speed == 0.0:
                 self.speed = min(self.speed, 0.5)
             return True
         return False
+
+    def _steady_m_s(self, target: tuple[float, float, float], alt0: float, length: float) -> float:
+        """The speed a leg from ``alt0`` to ``target`` (``length`` long) is flown at between
+        speeding up and slowing down: the cruise speed, slower where the straight 3-D line
+        would climb or descend faster than allowed."""
+        k = self.kinematics
+        steady = k.flown(self.cruise)
+        ramp = abs(target[2] - alt0)
+        if ramp > 0:
+            limit = k.climb_m_s if target[2] > alt0 else k.descend_m_s
+            steady = min(steady, limit * length / ramp)
+        return steady
+
+    def _along(
+        self,
+        north: float,
+        east: float,
+        dist: float,
+        step: float,
+        target: tuple[float, float, float],
+        alt0: float,
+        length: float,
+    ) -> float:
+        """``step`` metres toward ``target`` (``dist`` away, at (north, east)) on the leg from
+        ``alt0`` (``length`` long), at the leg's altitude there; the distance left."""
+        self._move(north, east, dist, step)
+        left = max(dist - step, 0.0)
+        self.alt = target[2] + (alt0 - target[2]) * (left / length)
+        self.vz = 0.0
+        return left
 
     def _move(self, north: float, east: float, dist: float, step: float) -> None:
         """``step`` metres along (north, east), which is ``dist`` long."""
@@ -402,12 +427,7 @@ class Flight:
             return False
         north, east = ground_offset(self.lat, self.lon, target[0], target[1])
         dist = math.hypot(north, east)
-        steady = k.flown(self.cruise)
-        ramp = abs(target[2] - alt0)
-        if ramp > 0:
-            steady = min(
-                steady, (k.climb_m_s if target[2] > alt0 else k.descend_m_s) * length / ramp
-            )
+        steady = self._steady_m_s(target, alt0, length)
         if abs(self.speed - steady) > 1e-9 or steady < 0.3:
             return False
         exit_speed = self._exit_speed(index, target)
@@ -419,10 +439,7 @@ class Flight:
         if steps < 2:
             return False
         self.t += steps * dt
-        self._move(north, east, dist, steps * each)
-        left = dist - steps * each
-        self.alt = target[2] + (alt0 - target[2]) * (left / length)
-        self.vz = 0.0
+        self._along(north, east, dist, steps * each, target, alt0, length)
         return True
 
     # ------------------------------------------------------------------ prediction

@@ -21,6 +21,11 @@ MAX_SPEED_M_S = 40.0  # no drone flies faster: beacon speeds are capped, boxes b
 TRACK_SLACK_M = 200.0  # position error a track allows on top of MAX_SPEED_M_S
 
 
+def _reach_m(seconds: float) -> float:
+    """How far from a plausible position a drone may plausibly be ``seconds`` from it."""
+    return TRACK_SLACK_M + MAX_SPEED_M_S * seconds
+
+
 @dataclass
 class Peer:
     node: int
@@ -110,7 +115,7 @@ class Peer:
         """How far from its anchor it may plausibly be at ``now`` (link time)."""
         if self.anchor is None:
             return 0.0
-        return TRACK_SLACK_M + MAX_SPEED_M_S * max(now - self.anchor[0], 0.0)
+        return _reach_m(max(now - self.anchor[0], 0.0))
 
     def plausible_at(self, point: tuple[int, int], when: float, within_s: float = 0.0) -> bool:
         """Whether it may have been at ``point`` at link time ``when`` (give or take
@@ -119,8 +124,7 @@ class Peer:
         if not self.track:
             return False
         made, where = min(self.track, key=lambda anchor: abs(anchor[0] - when))
-        reach = TRACK_SLACK_M + MAX_SPEED_M_S * (abs(when - made) + within_s)
-        return distance_m(point, where) <= reach
+        return distance_m(point, where) <= _reach_m(abs(when - made) + within_s)
 
     def position_age(self, now: float) -> float:
         """Seconds since its position was taken."""

@@ -133,6 +133,11 @@ def deviation(flown: Track, baseline: Track, local: Local | None = None) -> floa
     return max((math.hypot(h, v) for *_, h, v, _ in _aligned(flown, baseline, local)), default=0.0)
 
 
+def separation(a: Track, b: Track, local: Local | None = None) -> list[tuple[float, float]]:
+    """(t, 3-D distance) at each sample of ``a``, against ``b`` at the nearest time."""
+    return [(a[i][0], math.hypot(h, v)) for i, _, h, v, _ in _aligned(a, b, local)]
+
+
 def closest(
     a: Track, b: Track, local: Local | None = None
 ) -> tuple[float, float, tuple[float, float, float], tuple[float, float, float]]:

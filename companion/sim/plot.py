@@ -8,7 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from companion.sim.metrics import closest, enu
+from companion.sim.metrics import closest, enu, separation
 from companion.sim.replay import Replay, Tracks
 from companion.sim.report import FEW, NEAR_FACTOR, ReplayReport, shown_pairs
 from companion.sim.scenario import ScenarioError
@@ -231,14 +231,5 @@ def _arrows(
 
 
 def _separation(a: Track, b: Track) -> list[tuple[float, float]]:
-    """3-D distance of two trajectories over time (b sampled at a's times)."""
-    if not a or not b:
-        return []
-    out = []
-    j = 0
-    ref = (a[0][1], a[0][2])
-    for t, lat, lon, alt in a[:: max(1, len(a) // 2000)]:
-        while j + 1 < len(b) and abs(b[j + 1][0] - t) <= abs(b[j][0] - t):
-            j += 1
-        out.append((t, math.dist(enu((lat, lon, alt), ref), enu(b[j][1:], ref))))
-    return out
+    """3-D distance of two trajectories over time (b at a's times), 2000 points at most."""
+    return separation(a, b)[:: max(1, len(a) // 2000)]

@@ -281,8 +281,8 @@ class _Script:
 
     def _look_s(self, sim: float) -> float:
         """Until the next look at the schedule (virtual time): soon while any vehicle
-        flies, else at the next thing due (a take-off, a companion powering up or off, a
-        pause) within a second."""
+        flies, else at the next thing due (a take-off, a companion powering up or off)
+        within a second (a scripted pause comes in flight)."""
         if any(v.flying for v in self.vehicles.values()):
             return VIRTUAL_LOOK_S
         due = [
