@@ -16,11 +16,14 @@ and is authenticated in one of two ways:
   the start, when a new drone asks, when the sender learns a new neighbour, and every few
   minutes.
 * **tagged** (26 + 4 k bytes): ``body | k tags of 4 bytes`` -- one per neighbour whose beacon
-  key the sender holds (at most 8): HMAC-SHA256 under a key only the two of them can compute
-  (X25519 of their beacon keys, per direction), cut to 4 bytes, as LoRaWAN's and Bluetooth's
-  message integrity codes are.  A receiver checks the tag meant for it (it tries the k): a
-  forger's beacon passes with probability k / 2^32 per transmission, one frame on the air per
-  try (``docs/security.md``); a beacon costs 4 bytes per neighbour where a signature is 64.
+  key the sender holds and that it heard lately, most recent first (at most 16, so a tagged
+  beacon is never larger than a signed one; with 8, format 6, each drone of ten in range left
+  one neighbour out of every beacon, and that one could not check it): HMAC-SHA256 under a
+  key only the two of them can compute (X25519 of their beacon keys, per direction), cut to
+  4 bytes, as LoRaWAN's and Bluetooth's message integrity codes are.  A receiver checks the
+  tag meant for it (it tries the k): a forger's beacon passes with probability k / 2^32 per
+  transmission, one frame on the air per try (``docs/security.md``); a beacon costs 4 bytes
+  per neighbour where a signature is 64.
 
 The receiver drops a beacon it cannot check, whose time is more than the allowed skew off its
 clock, or whose (time, counter) is not above the last one it accepted from that drone (a
@@ -33,7 +36,7 @@ Certificate beacon (117 bytes): ``head | flags | certificate``
 (:mod:`companion.auth.certificate`); flag WANT: the sender heard a beacon it could not check
 and asks the drones nearby for their certificates and signed beacons.
 
-``head``: the format version (6) in the high nibble, the kind in the low one.  Position
+``head``: the format version (7) in the high nibble, the kind in the low one.  Position
 flags: bit 0 on the ground (about to take off), bits 1-2 the cipher suites offered.
 ``size_class``: the remaining path's padded size is at most 2^size_class segments (a run
 asking for more is refused before any work).  ``mission_version``: a digest of the path as
@@ -59,12 +62,12 @@ from companion.errors import CompanionError
 from companion.mission.levels import Slots
 from protocol.messages import Suite
 
-VERSION = 6
+VERSION = 7  # 7: up to 16 tags (6: 8)
 SIGNED, CERTIFICATE, TAGGED = 1, 2, 3
 KEYS_HASH_SIZE = 16
 BEACON_KEY_SIZE = 32
 TAG_SIZE = 4
-MAX_TAGS = 8
+MAX_TAGS = 16  # 26 + 4 x 16 = 90 bytes: a tagged beacon stays below a signed one (138)
 _BODY = struct.Struct(">BBiihHHIBIB")
 BODY_SIZE = _BODY.size  # 26
 SIGNED_SIZE = BODY_SIZE + BEACON_KEY_SIZE + KEYS_HASH_SIZE + SIGNATURE_SIZE  # 138

@@ -17,7 +17,9 @@ from companion.mission.levels import Slots
 from companion.neighbours.beacon import (
     BODY_SIZE,
     CERT_BEACON_SIZE,
+    MAX_TAGS,
     SIGNED_SIZE,
+    TAG_SIZE,
     Beacon,
     BeaconError,
     CertBeacon,
@@ -129,6 +131,28 @@ def test_a_neighbour_that_tagged_us_before_has_only_not_heard_us_lately(
     again.hear(1, a.cert_beacon(), NOW)
     assert again.hear(1, a.signed(beacon(counter=6)), NOW).kind is Heard.POSITION
     assert again.hear(1, beacon(counter=7).tagged(1, []), NOW).reason == NO_TAG
+
+
+def test_every_neighbour_of_a_busy_sky_checks_our_tagged_beacon(tmp_path: Path) -> None:
+    """Ten drones in range: each has nine neighbours.  With at most 8 tags a beacon left out
+    the neighbour heard least lately, which could not check it (a lost position; it then
+    asked for a signed beacon, 138 bytes): in busy_ten 24-30 signed beacons per drone.  Now
+    a tagged beacon carries up to MAX_TAGS, and is still no larger than a signed one."""
+    assert BODY_SIZE + TAG_SIZE * MAX_TAGS <= SIGNED_SIZE
+    acme = SigningKey.generate()
+    a = Drone(1, acme, tmp_path)
+    others = [Drone(node, acme, tmp_path) for node in range(2, 11)]  # nine
+    for counter, o in enumerate(others):
+        a.neighbours.hear(o.node, o.cert_beacon(), NOW)
+        assert a.neighbours.hear(o.node, o.signed(beacon()), NOW).kind is Heard.POSITION
+        o.neighbours.hear(1, a.cert_beacon(), NOW)
+        assert o.neighbours.hear(1, a.signed(beacon(counter=counter)), NOW).kind is Heard.POSITION
+    tagged = a.tagged(beacon(counter=len(others)))
+    assert len(tagged) == BODY_SIZE + TAG_SIZE * len(others)
+    for o in others:
+        got = o.neighbours.hear(1, tagged, NOW + 1)
+        assert got.kind is Heard.POSITION and got.neighbour is not None
+        assert got.neighbour.knows_us  # and it tells each that A heard it
 
 
 def test_forged_stale_and_replayed_beacons_are_dropped(pair: tuple[Drone, Drone]) -> None:
