@@ -320,7 +320,10 @@ class LinkEndpoint:
                     frames = out.burst()
                     fresh = out.tries[frames[-1].index] == 1
                     channel = self._data_channel(sess)
-                    done = [self._enqueue(f, control=False, channel=channel) for f in frames]
+                    done = [
+                        self._enqueue(f, control=False, channel=channel, lead=i == 0)
+                        for i, f in enumerate(frames)
+                    ]
                     sent_at = await done[-1]
                     await self._await_ack(out, acked, sess, sent_at, sample=fresh)
             except LinkTimeout as exc:
@@ -445,9 +448,17 @@ class LinkEndpoint:
     # ------------------------------------------------------------------ radio
 
     def _enqueue(
-        self, frame: Frame, *, control: bool, channel: int = 0, beacon: bool = False
+        self,
+        frame: Frame,
+        *,
+        control: bool,
+        channel: int = 0,
+        beacon: bool = False,
+        lead: bool = False,
     ) -> asyncio.Future[float]:
-        return self.radio.enqueue(frame.encode(), control=control, channel=channel, beacon=beacon)
+        return self.radio.enqueue(
+            frame.encode(), control=control, channel=channel, beacon=beacon, lead=lead
+        )
 
     # ------------------------------------------------------------------ channels
 

@@ -5,8 +5,10 @@ run's burst of 64 frames went out 20 s late on SF7, and in a busy sky peers went
 a minute -- the fail-safe then assumes they flew straight at us all that time (busy_ten: every
 precaution of the first minute).  Every frame waits for the duty-cycle budget
 (:class:`~companion.radio.airtime.DutyCycle`, data leaving a reserve for control), listens
-before talking where the transport can sense the channel (LoRa channel activity detection),
-and frames are spaced by the radio's turnaround time.  The endpoint
+before talking where the transport can sense the channel (LoRa channel activity detection;
+a beacon or control frame looks again sooner than data, and a burst starts only once the
+channel has stayed idle for :data:`LEAD_IDLE_S`, so other drones' beacons get between a
+run's messages), and frames are spaced by the radio's turnaround time.  The endpoint
 (:class:`~companion.radio.endpoint.LinkEndpoint`) enqueues encoded frames and awaits the time
 each one left.
 """
@@ -30,6 +32,9 @@ _JITTER = random.SystemRandom()  # os.urandom-backed, like every random choice h
 
 MAX_DEFER_S = 8.0  # listen before talk gives up waiting after this long (or three of the
 # profile's longest frames, if longer: at SF12 one frame is 8 s on the air)
+LEAD_IDLE_S = 0.1  # a burst's first data frame waits for the channel to stay idle this long
+DATA_BACKOFF_S = (0.02, 0.25)  # a data frame that found the channel busy looks again after
+PRIORITY_BACKOFF_S = (0.005, 0.03)  # ... a beacon or control frame sooner
 
 
 def _consume(future: asyncio.Future[float]) -> None:
@@ -43,6 +48,8 @@ class _TxItem:
     control: bool
     done: asyncio.Future[float]
     channel: int = 0
+    lead: bool = False  # the first data frame of a burst
+    idle_at: float | None = None  # (lead) since when the channel is idle, as far as known
 
 
 class Transmitter:
@@ -75,15 +82,21 @@ class Transmitter:
             self._tune(self.listen())
 
     def enqueue(
-        self, data: bytes, *, control: bool, channel: int = 0, beacon: bool = False
+        self,
+        data: bytes,
+        *,
+        control: bool,
+        channel: int = 0,
+        beacon: bool = False,
+        lead: bool = False,
     ) -> asyncio.Future[float]:
         """Queue one encoded frame (to go on ``channel`` of the region; ``beacon``: ahead of
-        other data, spending the data budget); the future gives the link time it finished
-        leaving."""
+        other data, spending the data budget; ``lead``: a data frame that starts a burst);
+        the future gives the link time it finished leaving."""
         if not self.running:
             raise self.error or LinkError("link endpoint is not running")
         done: asyncio.Future[float] = asyncio.get_running_loop().create_future()
-        item = _TxItem(data, self.profile.airtime(len(data)), control, done, channel)
+        item = _TxItem(data, self.profile.airtime(len(data)), control, done, channel, lead)
         (self._control if control else self._beacons if beacon else self._data).append(item)
         self._wake.set()
         return done
@@ -141,11 +154,24 @@ class Transmitter:
                 self._tune(item.channel)  # (listen before talk on the frame's channel)
             if deferred_since is None:
                 deferred_since = now
-            if sense is not None and sense() and now - deferred_since < patience:
-                # Listen before talk: another radio is on the air (LoRa channel activity
-                # detection).  Back off a random few frames' worth and look again.
-                await self.clock.sleep(_JITTER.uniform(0.02, 0.25))
-                continue
+            if sense is not None and now - deferred_since < patience:
+                if sense():
+                    # Listen before talk: another radio is on the air (LoRa channel
+                    # activity detection).  Back off and look again -- a beacon or control
+                    # frame sooner than data, so it takes the next gap.
+                    item.idle_at = None
+                    low, high = DATA_BACKOFF_S if queue is self._data else PRIORITY_BACKOFF_S
+                    await self.clock.sleep(_JITTER.uniform(low, high))
+                    continue
+                if item.lead and (item.idle_at is None or now - item.idle_at > 2 * LEAD_IDLE_S):
+                    # A new burst starts only on a channel idle for a moment: the frames of
+                    # a run follow each other 10 ms apart, and without such gaps other
+                    # drones' beacons found the channel busy for seconds (busy_ten: 8 % of
+                    # beacons went out only after 8 s of waiting, into somebody's frame).
+                    item.idle_at = now
+                    await self.clock.sleep(LEAD_IDLE_S)
+                    continue  # (and look again: idle still, it goes; a wait that other
+                    # frames of ours interrupted is done again)
             deferred_since = None
             queue.popleft()
             if item.done.cancelled():

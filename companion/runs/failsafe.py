@@ -27,6 +27,7 @@ from companion.mission.ground import reached_within, segment_distance_m
 from companion.radio.airtime import DutyCycle, LinkProfile
 from companion.radio.config import LinkConfig
 from companion.radio.frames import MAX_ACK_BITMAP, OVERHEAD
+from companion.radio.transmitter import LEAD_IDLE_S
 
 Point = tuple[int, int]
 LATENCY_S = LinkConfig().latency_allowance_s
@@ -84,6 +85,7 @@ def run_seconds(
     rto = full + ack + 2 * (profile.turnaround_s + latency_s)
     delivered = (1.0 - loss) ** 2  # an ACK request and its ACK both arrive
     per_burst = ack + 2 * profile.turnaround_s + (1 - delivered) / delivered * (1.25 * rto + ack)
+    per_burst += LEAD_IDLE_S  # a burst starts on a channel idle for a moment
     total = 0.0
     spent = 0.0  # Alice's data airtime (duty-cycle budget)
     for alice_sends, size in sizes:

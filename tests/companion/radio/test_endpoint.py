@@ -25,6 +25,7 @@ from companion.sim.medium import Channel, Impairments, SimMedium, SimTransport
 from companion.sim.virtual_time import SimulationStalled, run_simulated
 from tests.companion.radio.helpers import pair
 
+US915 = PROFILES["us915-sf7"]
 HARSH = Impairments(loss=0.3, corrupt=0.05, duplicate=0.05, reorder=0.1)
 
 
@@ -450,3 +451,53 @@ def test_a_third_node_hears_who_is_in_a_run_and_when_the_channel_fell_quiet() ->
             await node.close()
 
     run_simulated(main())
+
+
+def test_beacons_get_on_the_air_between_a_runs_messages() -> None:
+    """Two drones in a run send their messages one after the other, 10 ms apart frame by
+    frame; a third drone's beacons must still get on the air.  A burst starts only on a
+    channel idle for a moment (``LEAD_IDLE_S``), and a beacon looks at a busy channel more
+    often than data does, so it takes that moment.  Before, a beacon found the channel busy
+    until listen-before-talk gave up after 8 s and it went out into somebody's frame
+    (busy_ten: 8 % of beacons)."""
+
+    async def main() -> tuple[list[float], int]:
+        clock = Clock()
+        medium = SimMedium(Channel(Impairments(), seed=5), clock)
+        a, b, c = (LinkEndpoint(n, medium.attach(n), US915, clock=clock) for n in (1, 2, 3))
+        for node in (a, b, c):
+            await node.start()
+
+        async def run() -> None:
+            session = a.open(2)
+            for _ in range(12):
+                await a.send(2, session, os.urandom(1500))  # seven frames, about 2.5 s
+                await a.receive(2, session)
+
+        async def bob() -> None:
+            peer, session = await b.accept()
+            for _ in range(12):
+                await b.receive(peer, session)
+                await b.send(peer, session, os.urandom(300))
+
+        async def beacons() -> list[float]:
+            await clock.sleep(2.0)
+            waits = []
+            for k in range(8):
+                start = clock.now()
+                await c.beacon(bytes([k]) * 40)
+                waits.append(clock.now() - start)
+                await clock.sleep(1.0)
+            return waits
+
+        waits = (await asyncio.gather(run(), bob(), beacons()))[2]
+        heard = 0
+        while not a.beacons.empty():
+            heard += a.beacons.get_nowait()[0] == 3
+        for node in (a, b, c):
+            await node.close()
+        return waits, heard
+
+    waits, heard = run_simulated(main())
+    assert max(waits) < 4.0, waits  # at most one message's burst (before: up to 8 s)
+    assert heard == 8  # and none went out into a frame of the run
