@@ -68,7 +68,8 @@ def run_seconds(
     """Expected seconds of link time for messages (sent by Alice?, bytes), one after the
     other, as the link's selective-repeat ARQ (:mod:`companion.radio.arq`) sends them: each
     fragment until it arrives (``1 / (1 - loss)`` times); a burst per round of what is still
-    missing, each answered by one ACK; and a lost ACK request or ACK (probability
+    missing, each answered by one ACK and started on a channel idle for
+    :data:`~companion.radio.transmitter.LEAD_IDLE_S`; and a lost ACK request or ACK (probability
     ``1 - (1 - loss)^2`` per burst) costs a retransmission timeout (the endpoint's model:
     a frame, an ACK and two turnarounds with the latency allowance; jittered, 1.25 of it on
     average) and a probe.  Calibrated on the simulated link: the in-flight runs of US915 SF7

@@ -25,7 +25,6 @@ from companion.sim.medium import Channel, Impairments, SimMedium, SimTransport
 from companion.sim.virtual_time import SimulationStalled, run_simulated
 from tests.companion.radio.helpers import pair
 
-US915 = PROFILES["us915-sf7"]
 HARSH = Impairments(loss=0.3, corrupt=0.05, duplicate=0.05, reorder=0.1)
 
 
@@ -464,7 +463,9 @@ def test_beacons_get_on_the_air_between_a_runs_messages() -> None:
     async def main() -> tuple[list[float], int]:
         clock = Clock()
         medium = SimMedium(Channel(Impairments(), seed=5), clock)
-        a, b, c = (LinkEndpoint(n, medium.attach(n), US915, clock=clock) for n in (1, 2, 3))
+        a, b, c = (
+            LinkEndpoint(n, medium.attach(n), PROFILES["us915-sf7"], clock=clock) for n in (1, 2, 3)
+        )
         for node in (a, b, c):
             await node.start()
 
