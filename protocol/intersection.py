@@ -43,7 +43,8 @@ class Alice:
     """The party without keys: learns one bit per segment of her path.
 
     ``setup`` is the OT setup cached with this peer (compact suite), or None for a fresh one;
-    after the run :attr:`setup` holds the setup to cache.
+    after the run :attr:`setup` holds the setup to cache.  ``ask_n`` asks Bob for exactly
+    that many segments of his path (``Hello.n``; his answer of another size is refused).
 
     ``trusted_keys`` (paper suite only): the caller vouches for Bob's keys and software.  Alice
     cannot check the range of Bob's Paillier plaintexts (out-of-range values put her
@@ -62,6 +63,7 @@ class Alice:
         kappa: int = 40,
         limits: Limits = DEFAULT_LIMITS,
         horizon_m: int = 0,
+        ask_n: int = 0,
         volumes: VolumeSpec = CROSSING,
         digit_bits: int | None = None,
         block_bits: int = DEFAULT_BLOCK_BITS,
@@ -86,6 +88,7 @@ class Alice:
                 setup=setup,
                 limits=limits,
                 horizon_m=horizon_m,
+                ask_n=ask_n,
                 volumes=volumes,
                 digit_bits=digit_bits,
                 block_bits=block_bits,
@@ -103,6 +106,7 @@ class Alice:
                 kappa=kappa,
                 limits=limits,
                 horizon_m=horizon_m,
+                ask_n=ask_n,
                 trusted_keys=trusted_keys,
                 insecure_for_tests=insecure_for_tests,
             )

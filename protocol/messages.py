@@ -23,14 +23,14 @@ from protocol.geo.volumes import CROSSING, VolumeSpec
 from protocol.wire.encoding import Reader
 
 MAGIC = b"PD"
-VERSION = 3
+VERSION = 4
 HEADER_SIZE = 8
 MAX_BODY = (1 << 24) - 1
 NONCE_SIZE = 16
 
 
 class MsgType(enum.IntEnum):
-    HELLO = 1  # Alice -> Bob: suite, grid, m, horizon, nonce, suite offer
+    HELLO = 1  # Alice -> Bob: suite, grid, m, horizon, n asked, nonce, suite offer
     # OT suite (compact)
     OFFER = 2  # Bob -> Alice: n, nonce, setup reply, OT extension, product choice bits
     PRODUCTS = 3  # Alice -> Bob: OT products (shares of every compared value)
@@ -107,7 +107,10 @@ def take_blob(reader: Reader) -> bytes:
 class Hello:
     """Message 1.  ``offer`` is the suite's own part (the OT setup, see the suite modules);
     ``horizon_m`` asks Bob to compare only his next ``horizon_m`` metres of path (0: all);
-    ``volumes`` are the run's public volume parameters (all zero: the crossing test)."""
+    ``n`` asks him for exactly that many segments, his path cut or padded to them (0: his
+    own padded size) -- a size Alice chose from public facts, so that the run's size, which
+    every listener reads, shows nothing of his path; ``volumes`` are the run's public volume
+    parameters (all zero: the crossing test)."""
 
     suite: Suite
     kappa: int
@@ -117,6 +120,7 @@ class Hello:
     nonce: bytes
     offer: bytes = b""
     volumes: VolumeSpec = CROSSING
+    n: int = 0
 
     def to_bytes(self) -> bytes:
         if len(self.nonce) != NONCE_SIZE:
@@ -126,6 +130,7 @@ class Hello:
             + self.grid.to_bytes()
             + self.m.to_bytes(2, "big")
             + self.horizon_m.to_bytes(4, "big")
+            + self.n.to_bytes(2, "big")
             + self.volumes.to_bytes()
             + self.nonce
             + put_blob(self.offer)
@@ -144,8 +149,9 @@ class Hello:
         grid = GridSpec.from_bytes(reader.take(GridSpec.SIZE))
         m = reader.uint(2)
         horizon = reader.uint(4)
+        n = reader.uint(2)
         volumes = VolumeSpec.read(reader)
         nonce = reader.take(NONCE_SIZE)
         offer = take_blob(reader)
         reader.finish()
-        return cls(suite, kappa, grid, m, horizon, nonce, offer, volumes)
+        return cls(suite, kappa, grid, m, horizon, nonce, offer, volumes, n)

@@ -53,14 +53,24 @@ class Limits:
         ``max_segments`` (the path's tail waits for a later run); the one rule for it."""
         return self.padded(min(max(segments, 1), self.max_segments))
 
-    def peer_size(self, segments: int) -> int:
-        """The size the peer announces for its path, refused outside 1..max_segments."""
+    def peer_size(self, segments: int, asked: int = 0) -> int:
+        """The size the peer announces for its path, refused outside 1..max_segments, and
+        unless it is the size asked for (``asked``: Alice's ``Hello.n``, 0 for none)."""
         if not 1 <= segments <= self.max_segments:
             raise RemoteProtocolError(f"peer's path has {segments} segments")
+        if asked and segments != asked:
+            raise RemoteProtocolError(f"peer answered {segments} segments, {asked} were asked")
         return segments
 
 
 DEFAULT_LIMITS = Limits()
+
+
+def check_ask(n: int, limits: Limits) -> int:
+    """The size Alice asks of Bob's path (``Hello.n``): 0 (none) or 1..max_segments."""
+    if not 0 <= n <= limits.max_segments:
+        raise InputRangeError(f"a size of {n} segments asked, outside 0..{limits.max_segments}")
+    return n
 
 
 class Kind(enum.IntEnum):
@@ -264,7 +274,8 @@ PathSource = Sequence[Point] | Route | Callable[[Hello], Sequence[Point] | Route
 def bob_path(source: PathSource, hello: Hello, *, geographic: bool, limits: Limits) -> BobPath:
     """Bob's path on Alice's grid, cut to its box (:func:`protocol.geo.geometry.fit_to_box`), in
     the public size n: the padded size of his own path (at most ``max_segments``), whatever
-    Alice's grid -- so neither a refusal nor the size tells her where his path lies.  A
+    Alice's grid -- so neither a refusal nor the size tells her where his path lies -- or the
+    size she asked for (``Hello.n``: the source cuts his path to it, and it is padded).  A
     :class:`~protocol.geo.volumes.Route` brings its bands (grid units) and windows (seconds after
     the hello's epoch) along."""
     raw = source(hello) if callable(source) else source
@@ -272,5 +283,10 @@ def bob_path(source: PathSource, hello: Hello, *, geographic: bool, limits: Limi
     if geographic != (hello.grid.kind is GridKind.GEO):
         raise RemoteProtocolError("peer's grid kind does not match this path's coordinates")
     points = hello.grid.project_path(route.points, checked=False) if geographic else route.points
-    n = limits.public_size(route.segments)
+    if hello.n:
+        n = limits.peer_size(hello.n)  # (a size outside 1..max_segments is refused)
+        if route.segments > n:
+            raise LocalProtocolError(f"{route.segments} segments where {n} were asked")
+    else:
+        n = limits.public_size(route.segments)
     return fit_to_box(points, hello.grid.range, n, route.bands, route.windows)

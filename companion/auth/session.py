@@ -6,7 +6,7 @@ protocol's own first round trip, so authentication costs no extra radio turn:
 
 ====  ===========  ==================================================================
  1    A -> B       ``0x01 | A's fingerprint (8) | time u32 | eA (32) | sig_A (64) | HELLO``
- 2    B -> A       ``0x02 | eB (32) | sig_B (64) | AEAD(boot (16) | first reply)``, or
+ 2    B -> A       ``0x02 | eB (32) | sig_B (64) | AEAD(boot (16) | cover u8 | first reply)``, or
                    ``0x03 | code u8 | sig_B (64)``: a signed refusal (:class:`Refusal`)
  3..  either way   ``AEAD(message)``: 16-byte tag
 ====  ===========  ==================================================================
@@ -29,7 +29,9 @@ protocol's own first round trip, so authentication costs no extra radio turn:
   :meth:`companion.radio.LinkEndpoint.secure`).
 * ``boot`` is the responder's per-start nonce; with his public protocol keys it is what his
   signed beacons' keys hash covers (:func:`companion.neighbours.beacon.keys_hash`): the initiator
-  checks the keys of the run against the keys he announced.
+  checks the keys of the run against the keys he announced.  ``cover`` is the responder's
+  one byte about his answer: the companion's near-run cover of the horizon asked, in eighths
+  (``companion.mission.ground.near_answer``).
 
 Errors: anything wrong with an authenticated message raises :class:`AuthenticationError` (a
 :class:`~protocol.errors.RemoteProtocolError`); nothing else escapes.
@@ -60,7 +62,7 @@ EPHEMERAL_SIZE = 32
 BOOT_SIZE = 16
 TAG_SIZE = 16
 _INIT_HEAD = struct.Struct(f">B{FINGERPRINT_SIZE}sI{EPHEMERAL_SIZE}s{SIGNATURE_SIZE}s")
-ACCEPT_OVERHEAD = 1 + EPHEMERAL_SIZE + SIGNATURE_SIZE + TAG_SIZE + BOOT_SIZE  # 129 bytes
+ACCEPT_OVERHEAD = 1 + EPHEMERAL_SIZE + SIGNATURE_SIZE + TAG_SIZE + BOOT_SIZE + 1  # 130 bytes
 REFUSE_SIZE = 2 + SIGNATURE_SIZE
 ABORT_PROOF_SIZE = 16
 
@@ -136,6 +138,7 @@ class Init:
 @dataclass(frozen=True, slots=True)
 class Accepted:
     boot: bytes
+    cover: int
     payload: bytes
 
 
@@ -331,7 +334,7 @@ class Initiator(_Party):
         to_peer, from_peer = _derive(self._key, eb, th2)
         self._channel = _Channel(to_peer, from_peer, th2)
         inner = self._channel.open(bytes(data[1 + EPHEMERAL_SIZE + SIGNATURE_SIZE :]))
-        return Accepted(inner[:BOOT_SIZE], inner[BOOT_SIZE:])
+        return Accepted(inner[:BOOT_SIZE], inner[BOOT_SIZE], inner[BOOT_SIZE + 1 :])
 
     def _peer_cert(self) -> Certificate | None:
         return self.peer
@@ -372,13 +375,15 @@ class Responder(_Party):
     def _peer_cert(self) -> Certificate | None:
         return self.peer  # (only a verified requester's signed abort counts)
 
-    def accept(self, boot: bytes, payload: bytes) -> bytes:
+    def accept(self, boot: bytes, payload: bytes, *, cover: int) -> bytes:
         if self.peer is None:
             raise AuthenticationError("the request was not verified")
         if self.answered:
             raise AuthenticationError("request already answered")
         if len(boot) != BOOT_SIZE:
             raise ValueError("boot nonce of 16 bytes")
+        if not 0 <= cover <= 0xFF:
+            raise ValueError("cover is one byte")
         self.answered = True
         key, eb = _ephemeral()
         th2 = _th2(self._th1, eb)
@@ -386,7 +391,8 @@ class Responder(_Party):
         signature = self.me.key.sign(signed)
         from_peer, to_peer = _derive(key, self.init.ephemeral, th2)
         self._channel = _Channel(to_peer, from_peer, th2)
-        return bytes([ACCEPT]) + eb + signature + self._channel.seal(boot + payload)
+        sealed = self._channel.seal(boot + bytes([cover]) + payload)
+        return bytes([ACCEPT]) + eb + signature + sealed
 
     def refuse(self, code: Refusal) -> bytes:
         """A signed refusal (also to a requester not verified: it only says no)."""

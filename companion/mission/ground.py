@@ -11,6 +11,8 @@ from collections.abc import Sequence
 from protocol.geo.geodesy import ground_offset, moved
 from protocol.run import DEFAULT_LIMITS
 
+COVER_ALL = 8  # a near answer's cover counts eighths of the horizon asked: 8 is all of it
+
 
 def distance_m(a: tuple[int, int], b: tuple[int, int]) -> float:
     """Ground distance between two degE7 points."""
@@ -89,6 +91,31 @@ def near_cut(
         return list(path)
     segments = max(len(cut_at(path, horizon_m, position)) - 1, least)
     return list(path[: DEFAULT_LIMITS.public_size(segments) + 1])
+
+
+def near_answer(
+    path: Sequence[tuple[int, int]],
+    horizon_m: float,
+    position: tuple[int, int] | None = None,
+    *,
+    segments: int = 2,
+) -> tuple[list[tuple[int, int]], int]:
+    """Bob's side of a near run: exactly his next ``segments`` segments, whatever lies
+    within the horizon -- the run's size, which every listener reads, then shows nothing of
+    his path (docs/security.md, D8) -- and how much of the horizon asked they cover, in
+    eighths rounded down (:data:`COVER_ALL`: all of it, when the horizon ends within them).
+    Alice holds the run's decisions for as far as the cover reaches; the rest of the horizon
+    is the full run's.  The caller pads a shorter path to ``segments``."""
+    if horizon_m <= 0 or len(path) < 2:
+        return list(path), COVER_ALL
+    kept = list(path[: segments + 1])
+    if len(cut_at(path, horizon_m, position)) <= len(kept):
+        return kept, COVER_ALL
+    reach = sum(
+        distance_m(position if position is not None and k == 0 else a, b)
+        for k, (a, b) in enumerate(itertools.pairwise(kept))
+    )
+    return kept, min(COVER_ALL - 1, math.floor(COVER_ALL * reach / horizon_m))
 
 
 def reached_within(

@@ -19,7 +19,7 @@ from companion.context import Context
 from companion.events import EventKind, Retimed
 from companion.mission.flight_model import MAX_PREDICTION_S, Kinematics
 from companion.mission.flightpath import FlightPath, flight_path
-from companion.mission.ground import cut_behind, distance_m, near_cut
+from companion.mission.ground import cut_behind, distance_m, near_answer, near_cut
 from companion.mission.items import NAV_LOITER_TIME, NAV_WAYPOINT, MissionItem
 from companion.mission.levels import Slots
 from companion.mission.planner import Edit
@@ -35,7 +35,7 @@ TIMING_LOOK_S = 180.0  # how far ahead the timing watch predicts (the full sched
 TIMING_EVERY_S = 5.0  # and how often
 PREDICTIONS_KEPT = 8  # schedules remembered for a vehicle state (several paths and limits)
 CUT_BACK_M = 5.0  # a run's first leg starts this far behind the drone (position error, lag)
-NEAR_SEGMENTS = 2  # each side of a near run compares at least its next two segments
+NEAR_SEGMENTS = 2  # a near run compares at least our next two segments as Alice
 
 
 def mission_version(path: FlightPath, items: Sequence[MissionItem] = (), epoch: int = 0) -> int:
@@ -449,3 +449,11 @@ class OwnFlight:
         """The part of the remaining path a run with this horizon compares (a full run's
         horizon is 0: all of it)."""
         return near_cut(path, horizon, self.vehicle.here(), least=NEAR_SEGMENTS)
+
+    def near_answer(
+        self, path: list[tuple[int, int]], horizon: int, segments: int
+    ) -> tuple[list[tuple[int, int]], int]:
+        """What we answer a near run with: at most the next ``segments`` of ``path`` (the
+        size Alice asked for: a run's size on the air shows nothing of our path) and their
+        cover of the horizon (:func:`companion.mission.ground.near_answer`)."""
+        return near_answer(path, horizon, self.vehicle.here(), segments=segments)

@@ -21,7 +21,7 @@ from companion.auth.session import AuthenticationError, Identity, Initiator, Ref
 from companion.context import Context
 from companion.errors import CompanionError
 from companion.events import EventKind, PeerFailure, PeerNote, RunResult, RunStarted
-from companion.mission.ground import distance_m, near_cut, segment_distance_m
+from companion.mission.ground import COVER_ALL, distance_m, near_cut, segment_distance_m
 from companion.mission.own_flight import OwnFlight
 from companion.mission.schedule import route_volumes
 from companion.neighbours.beacon import keys_hash
@@ -60,6 +60,7 @@ GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet
 IDLE_BEACONS = 2.0  # several channels: a peer heard within this many beacon intervals is idle
 QUIET_CYCLES = (2.0, 6.0)  # in flight on one channel, a new run waits for a random quiet of
 # this many frame-ACK cycles after other pairs' run traffic (about 1-3 s on SF7)
+NEAR_ASK = 4  # a near run asks for four of the peer's segments when that still comes in time
 PRESS_S = 20.0  # ... unless a run with its peer started this much later would come too late
 ENGAGED_DEFER_S = 60.0  # a peer heard in other pairs' runs is asked anyway after this long:
 # frame headers are anybody's to forge, and a stranger must not keep our runs off for good
@@ -359,19 +360,21 @@ class AliceRuns:
         peer: Peer,
         grid: GridSpec,
         *,
+        n: int,
         fresh: bool,
     ) -> int:
         """How far the peer cuts its path in a near run where ours is ``path`` (from segment
         ``start``): as far as it can fly (at its speed, at least cruise) until we leave the
-        last of our segments, late by our tolerance, plus the margin and the separation.  Our near
-        segments are then flown before the peer can be past its cut, and the full run need
-        not compare them again (:meth:`_decided_by_near`).  But a longer cut may make the
-        peer's side of the near run larger (up to its whole remaining path, its beacon's size
-        class): only when even that run, its estimate stretched by ``NEAR_SLACK`` (the OT
-        setup's computing, collisions), still ends before the peer could be here; otherwise
-        -- and on the ground, whose windows never close -- ``horizon`` as asked, stretched to
-        the same time ahead at the peer's speed (the near run's decisions last as long as
-        the horizon at the peer's speed, :meth:`_decided`)."""
+        last of our segments, late by our tolerance, plus the margin and the separation.  Our
+        near segments are then flown before the peer can be past its cut, and the full run
+        need not compare them again (:meth:`_decided_by_near`) -- as far as the peer's answer
+        covers it: the peer answers with the ``n`` segments we ask for whatever the horizon
+        (:meth:`_near_ask`), and says how much of the horizon they cover.  Only when the run,
+        its estimate stretched by ``NEAR_SLACK`` (the OT setup's computing, collisions),
+        still ends before the peer could be here; otherwise -- and on the ground, whose
+        windows never close -- ``horizon`` as asked, stretched to the same time ahead at the
+        peer's speed (the near run's decisions last as long as the horizon at the peer's
+        speed, :meth:`_decided`)."""
         # The same time ahead as ours: the peer may fly faster than we do.
         ours = max(self.vehicle.speed_m_s, self.settings.cruise_m_s)
         theirs = self.neighbourhood.peer_pace(peer)
@@ -386,13 +389,29 @@ class AliceRuns:
         if longer <= horizon:
             return horizon
         m = DEFAULT_LIMITS.public_size(len(path) - 1)
-        n = peer.size
+        return horizon if self._too_late(peer, m, n, grid, fresh=fresh) else longer
+
+    def _near_ask(
+        self, path: list[tuple[int, int]], peer: Peer, grid: GridSpec, *, fresh: bool
+    ) -> int:
+        """How many segments a near run asks of the peer's path (``Hello.n``, exactly that
+        many: a run's size on the air then shows nothing of the peer's path): as many as we
+        compare, or four when a run with four still comes in time (its estimate stretched by
+        ``NEAR_SLACK``) -- short legs of the peer's within the horizon are then decided by
+        the near run, not left to the full run -- never more than its size class.  Public
+        facts and our own path only: our size, its size class, the urgency."""
+        m = DEFAULT_LIMITS.public_size(len(path) - 1)
+        ask = min(m, peer.size)
+        more = min(max(m, NEAR_ASK), peer.size)
+        if more > ask and not self._too_late(peer, m, more, grid, fresh=fresh):
+            return more
+        return ask
+
+    def _too_late(self, peer: Peer, m: int, n: int, grid: GridSpec, *, fresh: bool) -> bool:
+        """Whether an m x n near run, its estimate stretched by ``NEAR_SLACK``, would come
+        too late for the peer."""
         seconds = self.estimates.seconds(m, grid, fresh=fresh, n=n) * NEAR_SLACK
-        return (
-            horizon
-            if too_late(seconds, self.neighbourhood.urgency(peer), self.settings.failsafe)
-            else longer
-        )
+        return too_late(seconds, self.neighbourhood.urgency(peer), self.settings.failsafe)
 
     def _decided_by_near(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
         """How many of a full run's first segments it need not compare: those the near run
@@ -532,9 +551,14 @@ class AliceRuns:
         for attempt in range(2):
             grid = self.flight.grid(path)
             setup = self.neighbourhood.holder_setups.get(peer.node)
+            ask = 0  # a full run: the peer's whole path
             if phase is Phase.NEAR:
-                horizon = self._bob_horizon(asked, start, path, peer, grid, fresh=setup is None)
-            began = await self._begin(peer, phase, horizon, start, path, neighbour, grid, setup)
+                fresh = setup is None
+                ask = self._near_ask(path, peer, grid, fresh=fresh)
+                horizon = self._bob_horizon(asked, start, path, peer, grid, n=ask, fresh=fresh)
+            began = await self._begin(
+                peer, phase, (horizon, ask), start, path, neighbour, grid, setup
+            )
             if began is None:
                 return False
             alice, needed = began
@@ -553,6 +577,8 @@ class AliceRuns:
             break
         else:
             return False
+        if phase is Phase.NEAR:  # its decisions hold as far as the peer's answer reaches
+            peer.near_run = (report.started, horizon * report.cover // COVER_ALL)
         await self._accept(peer, phase, start, path, alice, report)
         return True
 
@@ -611,14 +637,15 @@ class AliceRuns:
         self,
         peer: Peer,
         phase: Phase,
-        horizon: int,
+        asks: tuple[int, int],
         start: int,
         path: list[tuple[int, int]],
         neighbour: Neighbour,
         grid: GridSpec,
         setup: HolderSetup | None,
     ) -> tuple[Alice, float] | None:
-        """Our machine for the run and the seconds it should take (None: our path cannot be
+        """Our machine for the run (``asks``: the horizon and the size asked of the peer's
+        path) and the seconds it should take (None: our path cannot be
         compared on this grid, recorded); a precaution at once if even the smallest Bob
         makes the result too late (the watch re-checks with his real size)."""
         try:
@@ -628,7 +655,8 @@ class AliceRuns:
                 grid,
                 suite=self.settings.suite,
                 setup=setup,
-                horizon_m=horizon,
+                horizon_m=asks[0],
+                ask_n=asks[1],
                 volumes=volumes,
                 ot_security=self.settings.ot_security,
                 trusted_keys=neighbour.operator.paper_keys,
@@ -651,8 +679,6 @@ class AliceRuns:
                 time_to_meet_s=round(meet, 1) if math.isfinite(meet) else None,
             ),
         )
-        if phase is Phase.NEAR:
-            peer.near_run = (self.clock.now(), horizon)
         if act_now(needed, meet, self.neighbourhood.earliest(peer), self.settings.failsafe):
             await self.guard.precaution(peer, needed, meet)
         return alice, needed

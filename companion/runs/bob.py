@@ -13,6 +13,7 @@ import functools
 import logging
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import NamedTuple
 
 from companion.auth.certificate import Certificate
@@ -20,7 +21,7 @@ from companion.auth.session import AuthenticationError, Identity, Init, Refusal,
 from companion.context import Context
 from companion.errors import CompanionError
 from companion.events import Answered, EventKind, PeerFailure, PeerNote
-from companion.mission.ground import distance_m
+from companion.mission.ground import COVER_ALL, distance_m
 from companion.mission.items import point_as_segment
 from companion.mission.own_flight import OwnFlight
 from companion.mission.schedule import T_RANGE_S, route_volumes, run_volumes
@@ -39,6 +40,7 @@ from companion.state import StateStore
 from protocol.errors import ProtocolError
 from protocol.geo.grid import GridKind
 from protocol.geo.volumes import Route as PathRoute
+from protocol.geo.volumes import pad_route
 from protocol.intersection import Bob
 from protocol.messages import Hello
 from protocol.ot.setup import ChooserSetup
@@ -53,6 +55,14 @@ REQUEST_LEAD_S = 10.0
 # on one US915 channel: 30-50 s, and the request was refused as stale after 30).  Replays
 # stay caught: the replay store keeps requests for twice the whole window.
 ACCESS_WAIT_S = 60.0
+
+
+@dataclass
+class Cover:
+    """How much of Alice's horizon our answer covers, in eighths (``COVER_ALL``: all of
+    it), known once our path is cut for her (it goes back sealed, with our first reply)."""
+
+    eighths: int = COVER_ALL
 
 
 class Responding(NamedTuple):
@@ -101,16 +111,33 @@ class BobAnswers:
             peer, session = await self.endpoint.accept()
             self.ctx.spawn(self._answer(peer, session), "answer")
 
-    def _bob_path(self, hello: Hello) -> list[tuple[int, int]] | PathRoute:
-        """What we answer with: the rest of the mission the vehicle holds, cut at Alice's
-        horizon, with its bands (on her grid) and windows (after her epoch) when she asks
-        for them."""
+    def _bob_path(self, hello: Hello, cover: Cover) -> PathRoute:
+        """What we answer with: the rest of the mission the vehicle holds -- in a near run
+        exactly the segments Alice asked for (:meth:`_near_size`; cut or padded), their
+        cover of her horizon put in ``cover`` -- with its bands (on her grid) and windows
+        (after her epoch) when she asks for them."""
+        route = self._route(hello, cover)
+        size = self._near_size(hello)
+        if hello.horizon_m > 0 and route.segments < size:
+            route = pad_route(route, size)
+        return route
+
+    def _near_size(self, hello: Hello) -> int:
+        """How many segments a near run of Alice's takes of our path: as many as she asked
+        for (``Hello.n``, chosen from public facts), else as many as she compares or our size
+        class, the smaller -- public numbers all: the run's size on the air shows nothing of
+        our path (docs/security.md, D8)."""
+        return hello.n or min(hello.m, self.flight.own_size())
+
+    def _route(self, hello: Hello, cover: Cover) -> PathRoute:
         start, path = self.flight.remaining_flown()
-        path = self.flight.near(self.flight.from_here(path), hello.horizon_m)
+        path, cover.eighths = self.flight.near_answer(
+            self.flight.from_here(path), hello.horizon_m, self._near_size(hello)
+        )
         points = point_as_segment(path)  # hovering: a point
         volumes = hello.volumes
         if not (volumes.bands or volumes.windows):
-            return points
+            return PathRoute(tuple(points))
         tolerance = self.settings.separation.tolerance
         resolution = hello.grid.resolution_mm
         since = self.flight.wall_of_state() - volumes.epoch_s
@@ -185,8 +212,9 @@ class BobAnswers:
                 separation = run_volumes(
                     self.settings.separation, hello.grid.resolution_mm, 0
                 ).separation
+                cover = Cover()
                 bob = Bob(
-                    self._bob_path,
+                    functools.partial(self._bob_path, cover=cover),
                     keys=self.bob_keys,
                     setups=setups,
                     geographic=True,
@@ -201,6 +229,7 @@ class BobAnswers:
                             bob,
                             secure=responder,
                             boot=self.boot,
+                            cover=lambda: cover.eighths,
                             timeout=self.settings.run_timeout_s,
                             first=responder.init.hello,
                             alive=functools.partial(self.neighbourhood.still_heard, peer),
@@ -323,7 +352,10 @@ class BobAnswers:
         allowed = min(max_segments, 1 << min(known.beacon.size_class, MAX_SIZE_CLASS))
         if hello.m > allowed:  # more than its beacon announced or its operator allows
             return Refusal.SIZE
-        if run_work(hello.m, self.flight.own_size(), hello.grid.range) > MAX_RUN_WORK:
+        if hello.n and not hello.horizon_m:
+            return Refusal.SIZE  # a size asked of a full run: our whole path or nothing
+        n = hello.n or self.flight.own_size()
+        if run_work(hello.m, n, hello.grid.range) > MAX_RUN_WORK:
             # More than a fair run (m x n x grid bits): Bob's CPU, memory and first reply
             # grow with it, and a refused run costs the asker nothing.
             return Refusal.SIZE

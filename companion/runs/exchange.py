@@ -38,6 +38,7 @@ from typing import TypeVar
 
 from companion.auth.session import Accepted, AuthenticationError, Initiator, Refusal, Responder
 from companion.errors import CompanionError
+from companion.mission.ground import COVER_ALL
 from companion.radio.arq import LinkError, LinkTimeout, PeerAborted, PeerElsewhere
 from companion.radio.endpoint import LinkEndpoint
 from companion.radio.frames import AbortCode
@@ -80,6 +81,7 @@ class RunReport:
     hits: list[bool] = field(default_factory=list)
     refused: Refusal | None = None  # Bob: the run ended with this signed refusal of his
     resent: int = 0  # sealed messages sent again after the link gave up on them (a jammer)
+    cover: int = COVER_ALL  # Alice: how much of her horizon Bob's answer covers, in eighths
 
     @property
     def wall_s(self) -> float:
@@ -284,6 +286,9 @@ async def run_alice(
                 if not isinstance(answer, Accepted):
                     raise PeerRefused(answer.code)
                 reply = answer.payload
+                if answer.cover > COVER_ALL:
+                    raise AuthenticationError(f"cover {answer.cover} out of range")
+                report.cover = answer.cover
                 message = await party.compute(partial(alice.receive, reply))
                 if check_keys is not None and not check_keys(answer.boot, alice.peer_keys):
                     raise AuthenticationError("the peer's keys do not match its beacons")
@@ -306,14 +311,17 @@ async def serve_bob(
     *,
     secure: Responder | None = None,
     boot: bytes = b"",
+    cover: Callable[[], int] | None = None,
     timeout: float | None = None,
     first: bytes | None = None,
     alive: Callable[[], bool] | None = None,
 ) -> RunReport:
     """Answer the session ``peer`` opened.  Its first message waits in the inbox, or was
     taken from it already and is passed as ``first`` -- with ``secure``, the HELLO inside the
-    request the :class:`Responder` verified.  A hello naming an OT setup Bob does not hold
-    is answered with a signed refusal (the peer starts a fresh setup)."""
+    request the :class:`Responder` verified.  ``cover()``, asked once the first reply is
+    computed, goes back sealed with it (:attr:`RunReport.cover`; all of it without).  A
+    hello naming an OT setup Bob does not hold is answered with a signed refusal (the peer
+    starts a fresh setup)."""
     report = RunReport(Role.BOB, peer, session, endpoint.clock.now())
     party = _Party(endpoint, peer, session, bob, report, secure, alive)
     pending = [first] if first is not None else []
@@ -339,7 +347,8 @@ async def serve_bob(
             if secure is None:
                 await party.send(reply)
             elif not opened:
-                await party.send(secure.accept(boot, reply), len(reply))
+                covered = COVER_ALL if cover is None else cover()
+                await party.send(secure.accept(boot, reply, cover=covered), len(reply))
             else:
                 await party.send(secure.seal(reply), len(reply))
             opened = True

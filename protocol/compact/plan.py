@@ -329,7 +329,16 @@ def _message_sizes(
     )
     header = 8
     hello = (
-        header + 2 + 17 + 2 + 4 + len(volumes.to_bytes()) + NONCE_SIZE + 2 + len(offer.to_bytes())
+        header
+        + 2
+        + 17
+        + 2
+        + 4
+        + 2
+        + len(volumes.to_bytes())
+        + NONCE_SIZE
+        + 2
+        + len(offer.to_bytes())
     )
     offer_size = (
         2

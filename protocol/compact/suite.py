@@ -82,7 +82,7 @@ from protocol.ot.setup import (
     chooser_message_size,
     chooser_setup,
 )
-from protocol.run import AliceSide, BobSide, Kind, Limits, State
+from protocol.run import AliceSide, BobSide, Kind, Limits, State, check_ask
 from protocol.wire.encoding import Reader
 
 __all__ = ["CompactAlice", "CompactBob"]
@@ -121,11 +121,13 @@ class CompactAlice(AliceSide):
         setup: HolderSetup | None,
         limits: Limits,
         horizon_m: int = 0,
+        ask_n: int = 0,
         volumes: VolumeSpec = CROSSING,
         digit_bits: int | None = None,
         block_bits: int = DEFAULT_BLOCK_BITS,
         ot_security: int = DEFAULT_SECURITY,
     ) -> None:
+        self.ask_n = check_ask(ask_n, limits)
         self.segments = route.segments
         self.m = limits.padded(self.segments)
         self.route = pad_route(route, self.m)
@@ -160,6 +162,7 @@ class CompactAlice(AliceSide):
             self.nonce,
             offer.to_bytes(),
             self.volumes,
+            self.ask_n,
         )
         self.state = State.RUNNING
         return hello.to_bytes()
@@ -181,7 +184,7 @@ class CompactAlice(AliceSide):
     # message 2 -> 3
     def _on_offer(self, body: bytes) -> bytes:
         reader = Reader(body)
-        self.n = self.limits.peer_size(reader.uint(2))
+        self.n = self.limits.peer_size(reader.uint(2), self.ask_n)
         bob_nonce = reader.take(NONCE_SIZE)
         self.run_volumes = self._agree(read_separation(reader))
         if self._fresh is not None:

@@ -57,7 +57,7 @@ from protocol.paper.keys import MAX_MODULUS_BITS, BobKeys
 from protocol.primitives.dgk import DGKPublicKey
 from protocol.primitives.paillier import PaillierCiphertext, PaillierPublicKey
 from protocol.primitives.params import check_kappa
-from protocol.run import AliceSide, BobSide, Kind, Layout, Limits, State, Wires
+from protocol.run import AliceSide, BobSide, Kind, Layout, Limits, State, Wires, check_ask
 from protocol.wire.encoding import Reader
 
 MAX_KEY_BYTES = 3 * (MAX_MODULUS_BITS // 8) + 4
@@ -152,9 +152,11 @@ class PaperAlice(AliceSide):
         kappa: int,
         limits: Limits,
         horizon_m: int = 0,
+        ask_n: int = 0,
         trusted_keys: bool = False,
         insecure_for_tests: bool = False,
     ) -> None:
+        self.ask_n = check_ask(ask_n, limits)
         if not trusted_keys:  # D3 (docs/security.md): nothing of Alice's without the trust
             raise UntrustedKeysError(
                 "the paper suite runs only with a peer trusted with its keys (trusted_keys=True):"
@@ -182,6 +184,7 @@ class PaperAlice(AliceSide):
             self.m,
             self.horizon_m,
             secrets.token_bytes(NONCE_SIZE),
+            n=self.ask_n,
         )
         return hello.to_bytes()
 
@@ -208,7 +211,7 @@ class PaperAlice(AliceSide):
     # message 2 -> 3
     def _on_keys(self, body: bytes) -> bytes:
         reader = Reader(body)
-        self.n = self.limits.peer_size(reader.uint(2))
+        self.n = self.limits.peer_size(reader.uint(2), self.ask_n)
         self._read_keys(reader, body)
         self.w = slot_bits(self.l, self.kappa)
         per = max(1, (self.paillier.n.bit_length() - 1) // self.w)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import pytest
@@ -12,7 +13,7 @@ from protocol.errors import InputRangeError, LocalProtocolError, RemoteProtocolE
 from protocol.geo.geometry import Point, pad_path, path_hits
 from protocol.geo.grid import GridKind, GridSpec
 from protocol.intersection import Alice, Bob
-from protocol.messages import Suite
+from protocol.messages import Hello, Suite
 from protocol.run import Limits, State
 from protocol.tools.loopback import run_paths
 from protocol.tools.paper_data import load_paper_data
@@ -153,6 +154,42 @@ def test_where_bob_lies_changes_neither_the_replies_nor_a_refusal(
         assert hits == expected
         sizes.add(tuple(transcript.sizes))
     assert len(sizes) == 1
+
+
+@pytest.mark.parametrize("suite", [Suite.COMPACT, Suite.PAPER])
+def test_a_size_asked_is_the_size_answered_whatever_bobs_path(
+    suite: Suite, ot_pair: Any, keys: Any
+) -> None:
+    """``Hello.n``: Alice asks Bob for exactly four segments.  Whether his path has one,
+    three or four, every message of the run has the same size (a listener reads nothing of
+    his path from it) and the answer is the predicate's on his path; a Bob who answers
+    another size is refused by name, and a path longer than asked is his own bug."""
+    alice_path = ((0, 0), (10, 10), (20, 0))
+    bobs = (
+        ((0, 10), (10, 0)),
+        ((0, 10), (10, 0), (15, 15), (25, 5)),
+        tuple((k, 30) for k in range(5)),
+    )
+    sizes = set()
+    for bob_path in bobs:
+        alice = Alice(
+            alice_path, GRID, suite=suite, setup=ot_pair.holder, ask_n=4, trusted_keys=True
+        )
+        bob = Bob(bob_path, keys=keys.bob, setups=ot_pair.setups)
+        transcript = run_paths(alice, bob)
+        assert alice.n == 4 and alice.hits == path_hits(alice_path, bob_path)
+        sizes.add(tuple(transcript.sizes))
+    assert len(sizes) == 1
+    alice = Alice(alice_path, GRID, suite=suite, setup=ot_pair.holder, ask_n=2, trusted_keys=True)
+    hello = alice.start()
+    bob = Bob(bobs[0], keys=keys.bob, setups=ot_pair.setups)
+    other = dataclasses.replace(Hello.from_bytes(hello), n=1).to_bytes()  # Bob reads 1
+    with pytest.raises(RemoteProtocolError, match="2 were asked"):
+        alice.receive(bob.receive(other) or b"")
+    with pytest.raises(LocalProtocolError, match="3 segments where 2"):
+        Bob(bobs[1], keys=keys.bob, setups=ot_pair.setups).receive(hello)
+    with pytest.raises(InputRangeError):
+        Alice(alice_path, GRID, suite=suite, ask_n=257, trusted_keys=True)
 
 
 def test_message_sizes_depend_only_on_public_values(ot_pair: Any, keys: Any) -> None:

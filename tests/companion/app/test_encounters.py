@@ -18,7 +18,15 @@ import pytest
 from companion.app.runtime import Companion, CompanionSettings
 from companion.mission.files import read_plan
 from companion.mission.flightpath import flight_path
-from companion.mission.ground import cut_at, cut_behind, distance_m, near_cut, reached_within
+from companion.mission.ground import (
+    COVER_ALL,
+    cut_at,
+    cut_behind,
+    distance_m,
+    near_answer,
+    near_cut,
+    reached_within,
+)
 from companion.mission.items import MissionItem
 from companion.mission.levels import NoClearAltitude, Slots, clear_raise, plan_raises
 from companion.mission.own_flight import box_radius_m
@@ -128,6 +136,23 @@ def test_near_cut_takes_what_the_padding_makes_free() -> None:
     assert near_cut(path, 5000) == path
     assert near_cut(path[:4], 100) == path[:3]  # two segments pad to two
     assert near_cut(path[:4], 650) == path[:4]  # four, but no more than there is
+
+
+def test_a_near_answer_is_two_segments_and_says_how_far_they_reach() -> None:
+    """Bob answers a near run with exactly his next two segments, whatever the horizon (its
+    size on the air then shows nothing of his path), and their cover of the horizon asked,
+    in eighths rounded down: all of it when the horizon ends within them."""
+    path = [north(300 * k) for k in range(10)]  # 9 segments
+    assert near_answer(path, 0) == (path, COVER_ALL)  # a full run: everything
+    assert near_answer(path, 100) == (path[:3], COVER_ALL)
+    assert near_answer(path, 590) == (path[:3], COVER_ALL)  # the horizon ends within them
+    assert near_answer(path, 650) == (path[:3], 7)  # 600 of 650 m: 7.38 eighths
+    assert near_answer(path, 1190) == (path[:3], 4)
+    assert near_answer(path, 4700) == (path[:3], 1)
+    assert near_answer(path, 5000) == (path[:3], 0)  # 600 m are under an eighth of it
+    # from the drone, 100 m along its first segment: 500 m to the end of the second
+    assert near_answer(path, 990, north(100)) == (path[:3], 4)
+    assert near_answer(path[:2], 5000) == (path[:2], COVER_ALL)  # the last leg: all there is
 
 
 def east(metres: float) -> tuple[int, int]:

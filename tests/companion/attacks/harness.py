@@ -260,12 +260,14 @@ class Rogue:
         path: tuple[Point, ...],
         grid: GridSpec,
         machine: type[Alice] = Alice,
+        horizon_m: int = 0,
+        ask_n: int = 0,
     ) -> tuple[RunReport, list[int]]:
         """A whole run as Alice (the real machine, or a ``machine`` of the attacker's, and
-        the real session) against ``victim``; its report and the sizes of the victim's
-        messages as they went on the air."""
+        the real session) against ``victim`` (a near run with ``horizon_m``, asking ``ask_n``
+        segments); its report and the sizes of the victim's messages as they went on the air."""
         victim_cert = w.credentials[victim].identity.cert
-        alice = machine(path, grid)
+        alice = machine(path, grid, horizon_m=horizon_m, ask_n=ask_n)
         start = len(w.sniffer.frames)
 
         def secure(session: int) -> Initiator:

@@ -10,6 +10,7 @@ from typing import Any
 import pytest
 
 from companion.auth.session import Refusal
+from companion.mission.ground import COVER_ALL, cut_at
 from companion.runs.exchange import PeerRefused
 from companion.settings import CompanionSettings
 from companion.sim.virtual_time import run_simulated
@@ -181,6 +182,45 @@ def test_a_run_ended_after_bobs_first_reply_counts(tmp_path: Path) -> None:
     counted, ends = run_simulated(main())
     assert ends == ["quit"] * 8 + ["BUDGET"], ends
     assert counted == 8
+
+
+def test_near_runs_show_listeners_nothing_of_bobs_path(tmp_path: Path) -> None:
+    """D8 on the air: a near run's size is a function of Bob's n.  Before, Bob answered with
+    his segments within Alice's horizon, padded to a power of two, so anybody on the channel
+    read from the size of every message of his how many of his segments lie within the
+    distance she picked (here, with a fresh OT setup: a first reply of 6,839 bytes for a
+    horizon of 100 m, 9,526 for 700 m and 3 km).  Now he answers with exactly as many
+    segments as she asks for (``Hello.n``; asked none, as many as she compares): every
+    message of his has the same size whatever the horizon, and how far the horizon reaches
+    beyond them goes to Alice alone, sealed -- their cover of it, in eighths, counted in the
+    run budget like the run itself."""
+
+    async def main() -> tuple[dict[tuple[int, int], tuple[list[int], int]], int]:
+        w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
+        rogue = await w.rogue(9)
+        await rogue.announce(w, HERE, size_class=2)
+        grid = GridSpec.geo(*HERE, radius_m=2000.0)
+        seen = {}
+        for ask in (0, 4):
+            for horizon in (100, 700, 3000):
+                report, sizes = await rogue.compare(
+                    w, 2, ((0, 0), (10, 0), (10, 10)), grid, horizon_m=horizon, ask_n=ask
+                )
+                seen[ask, horizon] = (sizes, report.cover)
+                await w.clock.sleep(10)
+        within = {  # Bob's segments within each horizon, as the old near cut counted them
+            h: len(cut_at(w.drones[2].flight.remaining_flown()[1], h)) - 1 for _, h in seen
+        }
+        await w.stop()
+        return seen, len(set(within.values()))
+
+    seen, differ = run_simulated(main())
+    assert differ > 1  # the horizons reach different numbers of Bob's segments
+    for ask in (0, 4):
+        assert len({tuple(s) for (a, _), (s, _) in seen.items() if a == ask}) == 1, seen
+    covers = [cover for (a, _), (_, cover) in seen.items() if a == 0]  # two segments
+    assert covers[0] == COVER_ALL and covers[-1] < covers[1] < COVER_ALL, covers
+    assert seen[4, 700][0][0] > seen[0, 700][0][0]  # four segments are more bytes
 
 
 def test_an_honest_box_beyond_the_peers_limit_is_refused_and_said_so(tmp_path: Path) -> None:

@@ -43,8 +43,8 @@ def handshake(
 def test_a_whole_session(fleet: dict[int, Identity]) -> None:
     alice, bob, msg1 = handshake(fleet)
     assert bob.init.hello == b"HELLO" and len(msg1) == 109 + 5
-    answer = alice.reply(bob.accept(b"B" * 16, b"OFFER"))
-    assert answer == Accepted(b"B" * 16, b"OFFER")
+    answer = alice.reply(bob.accept(b"B" * 16, b"OFFER", cover=5))
+    assert answer == Accepted(b"B" * 16, 5, b"OFFER")
     for k in range(4):
         assert bob.open(alice.seal(b"from alice %d" % k)) == b"from alice %d" % k
         assert alice.open(bob.seal(b"from bob %d" % k)) == b"from bob %d" % k
@@ -77,7 +77,7 @@ def test_message_1_is_checked_before_any_work(fleet: dict[int, Identity]) -> Non
 
 def test_forged_tampered_reordered_and_spliced_messages_fail(fleet: dict[int, Identity]) -> None:
     alice, bob, _ = handshake(fleet)
-    reply = bob.accept(b"B" * 16, b"OFFER")
+    reply = bob.accept(b"B" * 16, b"OFFER", cover=8)
     for k in range(len(reply)):
         bad = bytearray(reply)
         bad[k] ^= 0x01
@@ -93,9 +93,9 @@ def test_forged_tampered_reordered_and_spliced_messages_fail(fleet: dict[int, Id
         bob.open(first)  # a failed session stays failed
     # spliced: a message of another session between the same two drones
     alice2, bob2, _ = handshake(fleet, route=Route(1, 2, 99))
-    alice2.reply(bob2.accept(b"C" * 16, b"OFFER"))
+    alice2.reply(bob2.accept(b"C" * 16, b"OFFER", cover=8))
     alice3, bob3, _ = handshake(fleet)
-    alice3.reply(bob3.accept(b"D" * 16, b"OFFER"))
+    alice3.reply(bob3.accept(b"D" * 16, b"OFFER", cover=8))
     with pytest.raises(AuthenticationError):
         bob3.open(alice2.seal(b"spliced"))
     with pytest.raises(AuthenticationError):
@@ -122,4 +122,4 @@ def test_refusals_are_signed(fleet: dict[int, Identity]) -> None:
     with pytest.raises(AuthenticationError, match="not signed by the peer"):
         alice.reply(stranger.refuse(Refusal.ROLE))
     with pytest.raises(AuthenticationError):
-        stranger.accept(b"B" * 16, b"x")  # never verified: never answered
+        stranger.accept(b"B" * 16, b"x", cover=8)  # never verified: never answered

@@ -93,8 +93,8 @@ def test_bench_link_rows(paper_shaped: PaperShaped) -> None:
         assert row["frames_sent"] > paper[key]["frames_sent"]
     table = format_link(result)
     assert "| us915-sf9 | 30% | paper pair | 10/10 |" in table
-    for row in rows:  # authenticated runs: key exchange (109 + 129 B) and a tag per message
-        assert row["auth_bytes"] >= 109 + 129 + 16
+    for row in rows:  # authenticated runs: key exchange (109 + 130 B) and a tag per message
+        assert row["auth_bytes"] >= 109 + 130 + 16
     sf9 = {c["kind"]: c for c in result["beacons"]["us915-sf9"]}
     assert sf9["signed"]["frames"] == 3 and sf9["tagged, 1 neighbour"]["frames"] == 1
     assert "| us915-sf9 | signed | 138 | 3 |" in table
@@ -116,7 +116,7 @@ def test_authentication_adds_the_key_exchange_and_a_tag_per_message(
     paper_shaped: PaperShaped,
 ) -> None:
     """The same run with and without authentication: the difference is 109 bytes on the
-    request, 129 on the answer and 16 on every further message, and nothing else."""
+    request, 130 on the answer and 16 on every further message, and nothing else."""
     case = load_paper_data(paper_shaped.directory).pairs[0]
     party = Party.generate(Suite.COMPACT)
     plain = link_case(case, party, PROFILES["ideal"], authenticated=False)
@@ -128,7 +128,7 @@ def test_authentication_adds_the_key_exchange_and_a_tag_per_message(
     assert plain["auth_bytes"] == 0 and secure["hits"] == plain["hits"] == secure["plain_hits"]
     assert secure["messages"] == plain["messages"]
     assert secure["auth_bytes"] == sent(secure) - sent(plain)
-    assert secure["auth_bytes"] == 109 + 129 + 16 * (secure["messages"] - 2)
+    assert secure["auth_bytes"] == 109 + 130 + 16 * (secure["messages"] - 2)
 
 
 def test_compare_mission_files_as_they_are_flown(tmp_path: Path) -> None:

@@ -41,11 +41,19 @@ grids = st.builds(
     horizon=st.integers(0, 2**32 - 1),
     nonce=st.binary(min_size=16, max_size=16),
     offer=st.binary(max_size=300),
+    n=st.integers(0, 0xFFFF),
 )
 def test_hello_round_trip(
-    suite: Suite, kappa: int, grid: GridSpec, m: int, horizon: int, nonce: bytes, offer: bytes
+    suite: Suite,
+    kappa: int,
+    grid: GridSpec,
+    m: int,
+    horizon: int,
+    nonce: bytes,
+    offer: bytes,
+    n: int,
 ) -> None:
-    hello = Hello(suite, kappa, grid, m, horizon, nonce, offer)
+    hello = Hello(suite, kappa, grid, m, horizon, nonce, offer, n=n)
     assert Hello.from_bytes(hello.to_bytes()) == hello
 
 
