@@ -196,9 +196,12 @@ class OwnFlight:
         return {k: v for k, v in raises.items() if k >= first}
 
     def own_size(self) -> int:
-        """Our remaining path's padded size (our beacons' size class; as Bob, at most n)."""
-        _, path = self.remaining_path()
-        return DEFAULT_LIMITS.public_size(len(path) - 1)
+        """Our remaining path's padded size: our beacons' size class, and as Bob the n of
+        every full run (his answer is padded to it) -- of the original mission or of the one
+        the vehicle holds, whichever has more segments (an edit may insert a waypoint), so
+        that a full run's size shows listeners nothing our beacons do not."""
+        segments = max(len(self.remaining_path()[1]), len(self.remaining_flown()[1])) - 1
+        return DEFAULT_LIMITS.public_size(segments)
 
     def home_deg(self) -> tuple[float, float, float]:
         """Home (degrees, metres AMSL): PX4's HOME_POSITION, ArduPilot's item 0, or else

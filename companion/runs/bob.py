@@ -112,15 +112,14 @@ class BobAnswers:
             self.ctx.spawn(self._answer(peer, session), "answer")
 
     def _bob_path(self, hello: Hello, cover: Cover) -> PathRoute:
-        """What we answer with: the rest of the mission the vehicle holds -- in a near run
-        exactly the segments Alice asked for (:meth:`_near_size`; cut or padded), their
-        cover of her horizon put in ``cover`` -- with its bands (on her grid) and windows
-        (after her epoch) when she asks for them."""
+        """What we answer with: the rest of the mission the vehicle holds, padded to our size
+        class (:meth:`OwnFlight.own_size`) -- in a near run exactly the segments Alice asked
+        for (:meth:`_near_size`; cut or padded), their cover of her horizon put in ``cover``
+        -- with its bands (on her grid) and windows (after her epoch) when she asks for
+        them."""
         route = self._route(hello, cover)
-        size = self._near_size(hello)
-        if hello.horizon_m > 0 and route.segments < size:
-            route = pad_route(route, size)
-        return route
+        size = self._near_size(hello) if hello.horizon_m > 0 else self.flight.own_size()
+        return pad_route(route, size) if route.segments < size else route
 
     def _near_size(self, hello: Hello) -> int:
         """How many segments a near run of Alice's takes of our path: as many as she asked

@@ -98,3 +98,17 @@ def test_progress_during_an_upload_keeps_the_old_numbering() -> None:
 
     during, after = run_simulated(main())
     assert during == 2 and after == 5  # reported after the upload began: taken
+
+
+def test_the_size_class_counts_a_waypoint_an_edit_inserted() -> None:
+    """Our size class (beacons) is the n of every full run we answer: with a waypoint an
+    edit inserted, the mission the vehicle holds has a segment more than the original --
+    five where four pad to four -- and the class counts it (it said 4, and a full run then
+    showed listeners 8)."""
+    flight, _ = _flight(6)
+    assert len(flight.remaining_path()[1]) - 1 == 4 and flight.own_size() == 4
+    m = flight.mission
+    inserted = m[2].replace(x=m[2].x + 5000)
+    new = [*m[:2], inserted, *[it.replace(seq=it.seq + 1) for it in m[2:]]]
+    flight.edited(new, {}, Edit(new, (0, 1, 2, *range(2, len(m))), 2), mark=0, sent=0.0)
+    assert len(flight.remaining_flown()[1]) - 1 == 5 and flight.own_size() == 8
