@@ -57,6 +57,15 @@ def cut_behind(
     return [(round(cut[0] * 1e7), round(cut[1] * 1e7)), *path[1:]]
 
 
+def along_m(path: Sequence[tuple[int, int]], position: tuple[int, int] | None = None) -> float:
+    """How far it is along ``path`` to its end, from ``position`` (the drone, somewhere on
+    the first segment) when given, else from the first vertex."""
+    return sum(
+        distance_m(position if position is not None and k == 0 else a, b)
+        for k, (a, b) in enumerate(itertools.pairwise(path))
+    )
+
+
 def cut_at(
     path: Sequence[tuple[int, int]],
     horizon_m: float,
@@ -111,10 +120,7 @@ def near_answer(
     kept = list(path[: segments + 1])
     if len(cut_at(path, horizon_m, position)) <= len(kept):
         return kept, COVER_ALL
-    reach = sum(
-        distance_m(position if position is not None and k == 0 else a, b)
-        for k, (a, b) in enumerate(itertools.pairwise(kept))
-    )
+    reach = along_m(kept, position)
     return kept, min(COVER_ALL - 1, math.floor(COVER_ALL * reach / horizon_m))
 
 

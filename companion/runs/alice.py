@@ -11,7 +11,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
-import itertools
 import logging
 import math
 import secrets
@@ -21,7 +20,7 @@ from companion.auth.session import AuthenticationError, Identity, Initiator, Ref
 from companion.context import Context
 from companion.errors import CompanionError
 from companion.events import EventKind, PeerFailure, PeerNote, RunResult, RunStarted
-from companion.mission.ground import COVER_ALL, distance_m, near_cut, segment_distance_m
+from companion.mission.ground import COVER_ALL, along_m, near_cut, segment_distance_m
 from companion.mission.own_flight import OwnFlight
 from companion.mission.schedule import route_volumes
 from companion.neighbours.beacon import keys_hash
@@ -261,11 +260,7 @@ class AliceRuns:
         start, path = self.flight.remaining_path()
         covered = [k - start for k in sorted(peer.covered) if k >= start]
         here = self.vehicle.here()
-        left = sum(
-            distance_m(here if here is not None and k == 0 else a, b)
-            for k, (a, b) in enumerate(itertools.pairwise(path))
-            if k <= (covered[-1] if covered else -1)
-        )
+        left = along_m(path[: (covered[-1] if covered else -1) + 2], here)
         ends = now + left / speed
         if peer.near_run is not None:
             ends = min(ends, self.standing.near_expires(peer))
@@ -485,10 +480,7 @@ class AliceRuns:
             skip = self._before_meeting(peer, start, path)
             if skip:  # what is left of the horizon after the segments skipped
                 here = self.vehicle.here()
-                left = horizon - sum(
-                    distance_m(here if here is not None and k == 0 else a, b)
-                    for k, (a, b) in enumerate(itertools.pairwise(path[: skip + 1]))
-                )
+                left = horizon - along_m(path[: skip + 1], here)
                 peer.settled |= set(range(start, start + skip))  # no volume of its can meet them
                 start, path = start + skip, near_cut(path[skip:], max(left, 1.0), least=2)
             else:

@@ -328,18 +328,8 @@ def _message_sizes(
         else Offer(digit_bits, bytes(SETUP_ID_SIZE))
     )
     header = 8
-    hello = (
-        header
-        + 2
-        + 17
-        + 2
-        + 4
-        + 2
-        + len(volumes.to_bytes())
-        + NONCE_SIZE
-        + 2
-        + len(offer.to_bytes())
-    )
+    fields = 2 + 17 + 2 + 4 + 2  # suite and kappa, grid, m, horizon, n
+    hello = header + fields + len(volumes.to_bytes()) + NONCE_SIZE + 2 + len(offer.to_bytes())
     offer_size = (
         2
         + NONCE_SIZE

@@ -20,6 +20,7 @@ from companion.mission.files import read_plan
 from companion.mission.flightpath import flight_path
 from companion.mission.ground import (
     COVER_ALL,
+    along_m,
     cut_at,
     cut_behind,
     distance_m,
@@ -153,6 +154,7 @@ def test_a_near_answer_is_two_segments_and_says_how_far_they_reach() -> None:
     # from the drone, 100 m along its first segment: 500 m to the end of the second
     assert near_answer(path, 990, north(100)) == (path[:3], 4)
     assert near_answer(path[:2], 5000) == (path[:2], COVER_ALL)  # the last leg: all there is
+    assert abs(along_m(path[:3], north(100)) - 500) < 0.1 and along_m(path[:1]) == 0
 
 
 def east(metres: float) -> tuple[int, int]:
