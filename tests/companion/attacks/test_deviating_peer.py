@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from companion.auth.session import Refusal
+from companion.auth.session import AuthenticationError, Refusal
 from companion.mission.ground import COVER_ALL, cut_at
 from companion.runs.exchange import PeerRefused
 from companion.settings import CompanionSettings
@@ -221,6 +221,67 @@ def test_near_runs_show_listeners_nothing_of_bobs_path(tmp_path: Path) -> None:
     covers = [cover for (a, _), (_, cover) in seen.items() if a == 0]  # two segments
     assert covers[0] == COVER_ALL and covers[-1] < covers[1] < COVER_ALL, covers
     assert seen[4, 700][0][0] > seen[0, 700][0][0]  # four segments are more bytes
+
+
+def test_a_size_asked_beyond_a_fair_run_or_of_a_full_run_is_refused(
+    tmp_path: Path, monkeypatch: Any
+) -> None:
+    """``Hello.n`` is Alice's to choose: a near run asking Bob to pad his answer to 256
+    segments would make him work for a run far beyond a fair one, and a full run asking for
+    a size would cut his path where he must show all of it.  Both are refused (signed,
+    SIZE) before any work; a near run asking for four is answered."""
+    built = count_bobs(monkeypatch)
+
+    async def main() -> tuple[World, list[Any]]:
+        w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
+        rogue = await w.rogue(9)
+        await rogue.announce(w, HERE, size_class=2)
+        grid = GridSpec.geo(*HERE, radius_m=2000.0)
+        outcomes: list[Any] = []
+        for horizon, ask in ((500, 256), (0, 2), (500, 4)):
+            try:
+                report, _ = await rogue.compare(
+                    w, 2, ((0, 0), (10, 0), (10, 10)), grid, horizon_m=horizon, ask_n=ask
+                )
+                outcomes.append(report)
+            except PeerRefused as exc:
+                outcomes.append(exc.code)
+            await w.clock.sleep(10)
+        await w.stop()
+        return w, outcomes
+
+    w, (padded, full, fair) = run_simulated(main())
+    assert padded is Refusal.SIZE and full is Refusal.SIZE
+    assert not isinstance(fair, Refusal) and len(built) == 1
+    assert [e["reason"] for e in w.events(2, "refused")] == ["SIZE", "SIZE"]
+
+
+def test_a_cover_out_of_range_ends_the_run(tmp_path: Path, monkeypatch: Any) -> None:
+    """Bob's cover of the horizon (eighths, 0..8) is his to say: one above 8 would have
+    Alice hold her near run's decisions beyond anything he showed.  It ends the run as an
+    authentication failure, before any of his reply is used: no result, no edit."""
+    import companion.runs.bob as bob_module
+
+    honest = bob_module.BobAnswers._bob_path
+
+    def inflated(self: Any, hello: Any, cover: Any) -> Any:
+        route = honest(self, hello, cover)
+        cover.eighths = 9
+        return route
+
+    monkeypatch.setattr(bob_module.BobAnswers, "_bob_path", inflated)
+
+    async def main() -> World:
+        w = await world(tmp_path, missions={2: "inspection_north.plan"}, extra={9: "fleet"})
+        rogue = await w.rogue(9)
+        await rogue.announce(w, HERE, size_class=2)
+        grid = GridSpec.geo(*HERE, radius_m=2000.0)
+        with pytest.raises(AuthenticationError, match="cover 9"):
+            await rogue.compare(w, 2, ((0, 0), (10, 0), (10, 10)), grid, horizon_m=500)
+        await w.stop()
+        return w
+
+    run_simulated(main())
 
 
 def test_an_honest_box_beyond_the_peers_limit_is_refused_and_said_so(tmp_path: Path) -> None:
