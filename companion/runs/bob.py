@@ -117,8 +117,8 @@ class BobAnswers:
         for (:meth:`_near_size`; cut or padded), their cover of her horizon put in ``cover``
         -- with its bands (on her grid) and windows (after her epoch) when she asks for
         them."""
-        route = self._route(hello, cover)
         size = self._near_size(hello) if hello.horizon_m > 0 else self.flight.own_size()
+        route = self._route(hello, size, cover)
         return pad_route(route, size) if route.segments < size else route
 
     def _near_size(self, hello: Hello) -> int:
@@ -128,10 +128,11 @@ class BobAnswers:
         our path (docs/security.md, D8)."""
         return hello.n or min(hello.m, self.flight.own_size())
 
-    def _route(self, hello: Hello, cover: Cover) -> PathRoute:
+    def _route(self, hello: Hello, size: int, cover: Cover) -> PathRoute:
+        """Our remaining path from here, in a near run cut to ``size`` segments."""
         start, path = self.flight.remaining_flown()
         path, cover.eighths = self.flight.near_answer(
-            self.flight.from_here(path), hello.horizon_m, self._near_size(hello)
+            self.flight.from_here(path), hello.horizon_m, size
         )
         points = point_as_segment(path)  # hovering: a point
         volumes = hello.volumes
