@@ -43,7 +43,7 @@ from companion.radio.frames import (
     decode_frame,
 )
 from companion.radio.reassembly import Delivered, Receiver
-from companion.radio.stats import LinkStats
+from companion.radio.stats import ChannelUse, LinkStats
 from companion.radio.transmitter import Transmitter
 from companion.radio.transport import Transport
 from companion.tasks import TaskScope
@@ -52,6 +52,7 @@ log = logging.getLogger("companion.radio")
 CALL = b"\x00"  # several channels: a session's first message, on the common channel
 ENGAGED_CYCLES = 16  # a node heard in another pair's session is engaged this long after
 # (busy_ten, BUSY refusals per replay: 22 with 2 cycles, 12 with 8, 6 with 20)
+USE_HORIZON_S = 30.0  # how far back the channel's use is remembered
 GONE_CHECK_S = 5.0  # a receive told how to know a vanished peer looks this often
 GONE_QUIET_S = 30.0  # ... and gives up once the session, too, was quiet this long
 CALL_WAIT_S = 15.0  # a call not followed by a message this soon is forgotten
@@ -106,6 +107,8 @@ class LinkEndpoint:
         self.beacons: asyncio.Queue[tuple[int, bytes]] = asyncio.Queue(maxsize=64)
         self.radio = Transmitter(transport, profile, self.duty, self.stats, self.clock)
         self.radio.listen = self._listening
+        self.channel_use = ChannelUse(USE_HORIZON_S)  # frames heard and sent, any kind
+        self.radio.on_air = self.channel_use.add
         self._active: tuple[int, int] | None = None  # the session the radio listens for
         self._grace = (0, -math.inf)  # (channel, until): a session just closed there
         self._closed_on: dict[tuple[int, int], int] = {}  # closed sessions' own channels
@@ -270,6 +273,11 @@ class LinkEndpoint:
         would likely be refused BUSY or go unheard.  From public frame headers, which a
         stranger can forge: callers bound how long they defer to it."""
         return self.clock.now() - self._engaged.get(node, -math.inf) < ENGAGED_CYCLES * self.cycle_s
+
+    def load(self, window_s: float) -> float:
+        """Share of the last ``window_s`` the channel carried frames we heard or sent (any
+        kind; :class:`~companion.radio.stats.ChannelUse`)."""
+        return self.channel_use.share(self.clock.now(), window_s)
 
     def others_quiet_s(self) -> float:
         """Seconds since a frame of another pair's session was heard (on our channel)."""
@@ -537,6 +545,7 @@ class LinkEndpoint:
                 del self._engaged[node]
 
     def _on_bytes(self, data: bytes) -> None:
+        self.channel_use.add(self.clock.now(), self.profile.airtime(len(data)))
         try:
             frame = decode_frame(data)
         except FrameError as exc:

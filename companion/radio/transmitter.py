@@ -73,6 +73,8 @@ class Transmitter:
         self._wake = asyncio.Event()
         # where the radio listens between frames (several channels: the endpoint's choice)
         self.listen: Callable[[], int] = lambda: 0
+        # told of each frame once it is on the air: (ended at, seconds on the air)
+        self.on_air: Callable[[float, float], None] = lambda end, air: None
         self._tune: Callable[[int], None] | None = getattr(transport, "tune", None)
         self._sending = False
 
@@ -185,6 +187,7 @@ class Transmitter:
             self.stats.frames_sent += 1
             self.stats.bytes_sent += len(item.data)
             self.stats.airtime_s += item.airtime
+            self.on_air(self.clock.now(), item.airtime)
             self.retune()
             if not item.done.done():
                 item.done.set_result(self.clock.now())

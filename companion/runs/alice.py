@@ -59,6 +59,8 @@ GROUND_WAIT_S = 60.0  # on the ground, a run waits this long at most for a quiet
 IDLE_BEACONS = 2.0  # several channels: a peer heard within this many beacon intervals is idle
 QUIET_CYCLES = (2.0, 6.0)  # in flight on one channel, a new run waits for a random quiet of
 # this many frame-ACK cycles after other pairs' run traffic (about 1-3 s on SF7)
+LOAD_WINDOW_S = 5.0  # ... and once the channel carried frames less than LOAD_MAX of the last
+LOAD_MAX = 0.5  # LOAD_WINDOW_S (a beacon storm: a run's first frame waits behind it)
 NEAR_ASK = 4  # a near run asks for four of the peer's segments when that still comes in time
 PRESS_S = 20.0  # ... unless a run with its peer started this much later would come too late
 ENGAGED_DEFER_S = 60.0  # a peer heard in other pairs' runs is asked anyway after this long:
@@ -193,7 +195,12 @@ class AliceRuns:
         channel quiet for a random few frame cycles: runs started together share its airtime
         and collide, and all come late (busy_ten: nine hellos in the first 28 s, the first
         result at 380 s); one at a time each is as quick as alone, and the random wait keeps
-        the drones that waited from all starting together again.  A run with ``peer`` that
+        the drones that waited from all starting together again.  Nor while the channel is
+        loaded (:data:`LOAD_MAX`, beacons too): at the start of a busy sky no run is on the
+        air yet to defer to, while the drones' introductions fill the channel -- busy_ten's
+        nine runs began within 20 s, their first frames waited 19-54 s behind the beacons
+        and then shared the channel (the first result at 260 s, 11-25 requests refused BUSY
+        per replay; 1-5 with this wait).  A run with ``peer`` that
         would come too late if it waited longer (:data:`PRESS_S`) does not wait."""
         if self.endpoint.channels > 1 or self.vehicle.on_ground:
             return True  # (on the ground: the quiet channel of _next)
@@ -201,9 +208,11 @@ class AliceRuns:
             low, high = QUIET_CYCLES
             draw = low + (high - low) * secrets.randbelow(1 << 16) / (1 << 16)
             self._quiet_need = draw * self.endpoint.cycle_s
-        if self.endpoint.others_quiet_s() < self._quiet_need and not self.guard.pressing(
-            peer, PRESS_S
-        ):
+        taken = (
+            self.endpoint.others_quiet_s() < self._quiet_need
+            or self.endpoint.load(LOAD_WINDOW_S) >= LOAD_MAX
+        )
+        if taken and not self.guard.pressing(peer, PRESS_S):
             return False
         self._quiet_need = None
         return True

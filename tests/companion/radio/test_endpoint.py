@@ -415,6 +415,16 @@ def test_a_dying_link_task_is_logged_and_fails_every_waiter(
     assert record.fields["task"] == "link-1-tx"  # type: ignore[attr-defined]
 
 
+async def _three_nodes(clock: Clock) -> tuple[LinkEndpoint, LinkEndpoint, LinkEndpoint]:
+    """Nodes 1, 2 and 3 started on one lossless US915 SF7 channel."""
+    medium = SimMedium(Channel(Impairments(), seed=5), clock)
+    link = PROFILES["us915-sf7"]
+    a, b, c = (LinkEndpoint(n, medium.attach(n), link, clock=clock) for n in (1, 2, 3))
+    for node in (a, b, c):
+        await node.start()
+    return a, b, c
+
+
 def test_a_third_node_hears_who_is_in_a_run_and_when_the_channel_fell_quiet() -> None:
     """Frame headers are public: a node that overhears another pair's session knows both are
     engaged (a request to either would be refused BUSY) until ENGAGED_CYCLES frame-ACK cycles of
@@ -423,11 +433,7 @@ def test_a_third_node_hears_who_is_in_a_run_and_when_the_channel_fell_quiet() ->
 
     async def main() -> None:
         clock = Clock()
-        medium = SimMedium(Channel(Impairments(), seed=5), clock)
-        link = PROFILES["us915-sf7"]
-        a, b, c = (LinkEndpoint(n, medium.attach(n), link, clock=clock) for n in (1, 2, 3))
-        for node in (a, b, c):
-            await node.start()
+        a, b, c = await _three_nodes(clock)
         assert not c.engaged(1) and not c.engaged(2)
         assert c.others_quiet_s() == float("inf")
 
@@ -446,6 +452,42 @@ def test_a_third_node_hears_who_is_in_a_run_and_when_the_channel_fell_quiet() ->
         await clock.sleep(ENGAGED_CYCLES * c.cycle_s + 0.01)
         assert not c.engaged(1) and not c.engaged(2)
         assert c.others_quiet_s() > ENGAGED_CYCLES * c.cycle_s
+        for node in (a, b, c):
+            await node.close()
+
+    run_simulated(main())
+
+
+def test_the_channel_load_counts_every_frame_heard_and_sent() -> None:
+    """A node's view of how loaded the channel is (what the companion waits on before it
+    starts a run): the share of the last seconds carrying frames it heard -- another pair's
+    run, beacons -- or sent itself, back to nothing once the channel is quiet."""
+
+    async def main() -> None:
+        clock = Clock()
+        a, b, c = await _three_nodes(clock)
+        assert c.load(5.0) == 0.0
+
+        async def answer() -> None:
+            peer, session = await b.accept()
+            await b.receive(peer, session)
+
+        task = asyncio.create_task(answer())
+        began = clock.now()
+        await a.send(2, a.open(2), os.urandom(4000))
+        await task
+        took = clock.now() - began
+        # 4000 B is 20 full frames: the channel carried them most of the time
+        assert took > 5.0
+        for node in (a, b, c):
+            assert 0.6 < node.load(5.0) <= 1.0
+        # the sender counts its own frames as the third node hears them
+        assert abs(a.load(took) - c.load(took)) < 0.05
+        await clock.sleep(5.01)
+        assert c.load(5.0) == 0.0 and a.load(5.0) == 0.0
+        await c.beacon(b"x" * 20)
+        await clock.sleep(1.0)  # (on the air, and heard)
+        assert 0.0 < c.load(5.0) < 0.02 and 0.0 < a.load(5.0) < 0.02
         for node in (a, b, c):
             await node.close()
 
