@@ -192,16 +192,15 @@ class AliceRuns:
 
     def _channel_ours(self, peer: Peer) -> bool:
         """In flight on one channel, a run starts once other pairs' runs have left the
-        channel quiet for a random few frame cycles: runs started together share its airtime
-        and collide, and all come late (busy_ten: nine hellos in the first 28 s, the first
-        result at 380 s); one at a time each is as quick as alone, and the random wait keeps
-        the drones that waited from all starting together again.  Nor while the channel is
-        loaded (:data:`LOAD_MAX`, beacons too): at the start of a busy sky no run is on the
-        air yet to defer to, while the drones' introductions fill the channel -- busy_ten's
-        nine runs began within 20 s, their first frames waited 19-54 s behind the beacons
-        and then shared the channel (the first result at 260 s, 11-25 requests refused BUSY
-        per replay; 1-5 with this wait).  A run with ``peer`` that
-        would come too late if it waited longer (:data:`PRESS_S`) does not wait."""
+        channel quiet for a random few frame cycles, and once the channel (beacons too) is
+        no longer loaded (:data:`LOAD_MAX`): runs started together share its airtime and
+        collide, and all come late; one at a time each is as quick as alone, and the random
+        wait keeps the drones that waited from all starting together again.  The load
+        matters at the start of a busy sky, when no run is on the air yet to defer to while
+        the drones' introductions fill the channel (busy_ten: nine runs began within 20 s,
+        their first frames waited 19-54 s behind the beacons, the first result came at
+        260 s).  A run with ``peer`` that would come too late if it waited longer
+        (:data:`PRESS_S`) does not wait."""
         if self.endpoint.channels > 1 or self.vehicle.on_ground:
             return True  # (on the ground: the quiet channel of _next)
         if self._quiet_need is None:

@@ -45,7 +45,8 @@ def _runs(endpoint: _Endpoint, *, urgent: bool = False) -> AliceRuns:
     return runs
 
 
-LONG_QUIET = QUIET_CYCLES[1] * 0.5 + 1.0  # longer than any quiet a run waits for
+CYCLE_S = _Endpoint.cycle_s
+LONG_QUIET = QUIET_CYCLES[1] * CYCLE_S + 1.0  # longer than any quiet a run waits for
 
 
 def test_a_quiet_lightly_loaded_channel_is_ours() -> None:
@@ -64,6 +65,6 @@ def test_no_run_starts_into_a_loaded_channel_unless_it_is_pressing() -> None:
 
 
 def test_no_run_starts_right_after_another_pairs_frame() -> None:
-    just_heard = _Endpoint(quiet_s=QUIET_CYCLES[0] * 0.5 - 0.1, share=0.1)
+    just_heard = _Endpoint(quiet_s=QUIET_CYCLES[0] * CYCLE_S - 0.1, share=0.1)
     assert not _runs(just_heard)._channel_ours(None)  # type: ignore[arg-type]
     assert _runs(just_heard, urgent=True)._channel_ours(None)  # type: ignore[arg-type]
