@@ -187,11 +187,11 @@ BUSY = ("busy_six", "busy_ten", "busy_four_eu868")
 EDIT_FAILED = ("plan_failed", "upload_failed")  # (a failed run is not a failed edit)
 
 
-BUSY_RUNS = 3  # replays of each busy-sky scenario (single runs vary a lot)
+BUSY_RUNS = 8  # replays of each busy-sky scenario (single runs vary a lot; 10-40 s each)
 
 
 def busy() -> str:
-    """The busy-sky scenarios (issue 29) in virtual time, three runs each."""
+    """The busy-sky scenarios (issue 29) in virtual time, BUSY_RUNS runs each."""
     from companion.sim.replay import run_virtual
     from companion.sim.report import levels_up
     from companion.sim.scenario import load_scenario
