@@ -134,7 +134,10 @@ class Peer:
 RATE_SPAN_S = 4.0  # speeds and range rates are measured over at least this long
 SEPARATING_M_S = 2.0  # a range rate above this: the two fly apart
 MIN_CLOSING_M_S = 2.0  # a measured closing rate is taken as at least this
-FRESH_S = 15.0  # a range rate older than this is not trusted
+FRESH_S = 20.0  # a range rate older than this is not trusted: the longest gap between two
+# beacons sent at the default 10 s interval (1.3 intervals of jitter, half an interval deferred
+# behind a run's frames) and 2 s -- at 15 s one beacon in ten came after its measurement had
+# lapsed (busy_ten), and the fail-safe took a parallel track 800 m off for one flying at us
 
 
 def time_to_meet(
