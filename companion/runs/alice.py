@@ -62,9 +62,9 @@ QUIET_CYCLES = (2.0, 6.0)  # in flight on one channel, a new run waits for a ran
 LOAD_WINDOW_S = 5.0  # ... and once the channel carried frames less than LOAD_MAX of the last
 LOAD_MAX = 0.5  # LOAD_WINDOW_S (a beacon storm: a run's first frame waits behind it)
 NEAR_ASK = 4  # a near run asks for four of the peer's segments when that still comes in time
-LAZY_S = 360.0  # a crowded sky: a peer that could not be here within this long waits (the
-# fail-safe's own measure, :meth:`Neighbourhood.urgency`) -- a comparison is started only
-# for peers as urgent as this, or when a beacon gap leaves only the worst case
+LAZY_RUNS = 9.0  # a crowded sky (more pairs in range than this): a peer that could not be
+# here within the time of this many first runs waits (the fail-safe's own measure,
+# :meth:`Neighbourhood.urgency`; 368 s on US915 SF7)
 MEASURE_WAIT = 2.5  # ... a peer first heard waits this many beacon intervals to be measured
 PRESS_S = 20.0  # ... unless a run with its peer started this much later would come too late
 ENGAGED_DEFER_S = 60.0  # a peer heard in other pairs' runs is asked anyway after this long:
@@ -170,13 +170,13 @@ class AliceRuns:
             if now - self._ground_wait < GROUND_WAIT_S:
                 return None
         self._ground_wait = None
-        crowded = self._crowded()
+        lazy = self._lazy_s()
         ready = [
             p
             for p in due
             if (p.plan[0][0] is Phase.NEAR or p.full_after <= now or quiet)
             and p.node not in engaged
-            and (not crowded or self._urgent(p, now))
+            and (lazy is None or self._urgent(p, now, lazy))
         ]
         if not ready:
             return None
@@ -196,31 +196,32 @@ class AliceRuns:
             ),
         )
 
-    def _crowded(self) -> bool:
-        """In flight, more drones in range than one channel compares pair by pair within
-        :data:`LAZY_S` (every pair's first run, two segments each with a fresh OT setup):
-        comparing every peer as soon as it is heard then fills the channel with pairs that
-        never come near -- busy_ten's parallel tracks 800 m apart were most of its runs --
-        while the pairs that do wait behind them (their fail-safe climbs).  From the
-        neighbourhood's size and the run sizes only."""
+    def _lazy_s(self) -> float | None:
+        """How soon a peer must be able to be here to be compared now, in a crowded sky --
+        in flight, more pairs of drones in range than :data:`LAZY_RUNS` first runs (two
+        segments each with a fresh OT setup) -- else None: compare every peer once heard.
+        Comparing everyone at once fills a crowded channel with pairs that never come near
+        -- busy_ten's parallel tracks 800 m apart were most of its runs -- while the pairs
+        that do wait behind them (their fail-safe climbs).  From the neighbourhood's size
+        and the run sizes only; in first runs, so a slow link (EU868 SF9's duty cycle: 40
+        minutes a run) waits as long in runs as a fast one."""
         if self.vehicle.on_ground:
-            return False  # (before take-off every peer is compared: the ground waits)
+            return None  # (before take-off every peer is compared: the ground waits)
         _, path = self.flight.remaining_path()
-        if len(path) < 2:
-            return False
         drones = len(self.neighbourhood.peers) + 1
-        run = self.estimates.seconds(2, self.flight.grid(path), fresh=True)
-        return drones * (drones - 1) / 2 * run > LAZY_S
+        if len(path) < 2 or drones * (drones - 1) / 2 <= LAZY_RUNS:
+            return None
+        return LAZY_RUNS * self.estimates.seconds(2, self.flight.grid(path), fresh=True)
 
-    def _urgent(self, peer: Peer, now: float) -> bool:
+    def _urgent(self, peer: Peer, now: float, lazy_s: float) -> bool:
         """Whether a crowded sky compares with ``peer`` now: when it could be here within
-        :data:`LAZY_S` by the fail-safe's measure (a range rate from two beacons, fresh, else
+        ``lazy_s`` by the fail-safe's measure (a range rate from two beacons, fresh, else
         flying straight at us), and a peer met moments ago, not measured yet, only when a
         run with it could not wait for its second beacon (:meth:`Guard.pressing`)."""
         interval = self.neighbourhood.cadence.interval_s
         if not peer.measured and now - peer.met_at < MEASURE_WAIT * interval:
             return self.guard.pressing(peer, PRESS_S)
-        return self.neighbourhood.urgency(peer) <= LAZY_S
+        return self.neighbourhood.urgency(peer) <= lazy_s
 
     def _channel_ours(self, peer: Peer) -> bool:
         """In flight on one channel, a run starts once other pairs' runs have left the

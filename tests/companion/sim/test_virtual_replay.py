@@ -107,7 +107,7 @@ def test_busy_sky_of_ten_drones() -> None:
     open: its targets are no false alarm, at most one precaution, 60 KB a drone).  The
     conflict is resolved, nothing made worse, all missions flown, and at most two
     precautions: 0-2 in each of 16 measured runs (13 with at most one) since a crowded sky
-    compares only the peers that could be here within 6 minutes; before, 1-4."""
+    compares only the peers that could be here within nine first runs; before, 1-4."""
     report = _virtual("busy_ten")
     assert report["finished"]
     assert report["conflicts"] == report["conflicts_resolved"] == 1
