@@ -198,8 +198,8 @@ class AliceRuns:
 
     def _lazy_s(self) -> float | None:
         """How soon a peer must be able to be here to be compared now, in a crowded sky --
-        in flight, more pairs of drones in range than :data:`LAZY_RUNS` first runs (two
-        segments each with a fresh OT setup) -- else None: compare every peer once heard.
+        in flight, more than :data:`LAZY_RUNS` pairs of drones in range: that many first runs
+        (two segments each with a fresh OT setup) -- else None: compare every peer once heard.
         Comparing everyone at once fills a crowded channel with pairs that never come near
         -- busy_ten's parallel tracks 800 m apart were most of its runs -- while the pairs
         that do wait behind them (their fail-safe climbs).  From the neighbourhood's size
