@@ -12,12 +12,23 @@ other one.  So a drone crossing one that cruises 5 m higher
 climbs past it with the separation, never into its altitude; a peer whose band is already
 clear is no conflict at all (the comparison's bands say so).  With three or more drones a
 drone can be Alice to one peer and Bob to another: each announces its new slots at once, and
-a drone that must stay clear of them re-plans.  A run compares Alice's path as planned,
-without her raises, so a raise must not carry a segment into the altitudes of a peer the
-runs found clear of the unraised path: raises keep clear of the slots of every peer that
-flies its own altitudes and of every lower node's too (``keep_clear``); of two drones that
-raised into each other's slots the higher node moves, and a drone does not chase a higher
-node that moved, so two never climb past each other in turn.
+a drone that must stay clear of them re-plans.
+
+A run compares Alice's path as planned, so a raise of hers cannot undo the conflict it was
+made for (the planned band still meets the peer: the raise stands while the conflict does),
+but with each segment's band *reaching* as far as she flies it (:func:`reach`: the raise of
+the segment and of its neighbours, whose legs climb to it and descend from it) -- so a run
+also sees a peer her raises or their ramps come near.  A peer whose slots her reaches do not
+come within the separation of, where the planned bands did not already (:func:`reaching`),
+would get the same answer again: a raise of hers means a new run only with the peers it
+comes near.  Raises keep clear of the slots of every peer that flies its own altitudes
+(``keep_clear``: a conflict the next run would find anyway, avoided at once); a raised peer's
+slots span its column from its cruise up, and keeping clear of those too made drones raised
+for each other climb past each other in turn to the ceiling (four drones through one point:
++90 m).  Raises so go above the peers runs found in conflict and the peers not raised yet,
+never above a peer only because it climbed for a third drone, and no two drones chase each
+other: four drones through one point stacked three levels (+45 m) in every measured run
+(``busy_four_eu868``, docs/benchmarks.md).
 
 What a peer learns: which 5 m slots the drone occupies somewhere on its remaining path -- not
 where, not which segment, not its altitude to better than 5 m (its beacon's current altitude
@@ -86,6 +97,43 @@ class Slots:
         return out
 
 
+def reach(raises: Mapping[int, float]) -> dict[int, float]:
+    """Segment -> metres its band reaches past the plan as flown: the largest (by size) of
+    its raise and its neighbours' -- a leg is a straight 3-D line, so the leg before a
+    raised run climbs to it and the first one after descends from it
+    (:mod:`companion.mission.planner`); an in-flight edit's inserted waypoint lies on the
+    raised segment itself."""
+    out: dict[int, float] = {}
+    for k in {j + d for j, r in raises.items() if r for d in (-1, 0, 1) if j + d >= 0}:
+        out[k] = max((raises.get(j, 0.0) for j in (k - 1, k, k + 1)), key=abs)
+    return out
+
+
+def reaching(
+    bands: Mapping[int, tuple[float, float]],
+    reaches: Mapping[int, float],
+    slots: Slots,
+    vertical_m: float,
+) -> frozenset[tuple[int, float]]:
+    """The reaches (segment, metres) that bring a segment within ``vertical_m`` of ``slots``
+    where its planned band (``bands``) was not: a run against the drone announcing them must
+    see them; against any other drone a reach changes nothing -- its band comes within the
+    separation of no altitude the planned band did not."""
+    spans = slots.intervals()
+    out = set()
+    for k, extra in reaches.items():
+        if k not in bands or not extra:
+            continue
+        low, high = bands[k]
+        if extra > 0:
+            near = (high + vertical_m, high + extra + vertical_m)
+        else:
+            near = (low + extra - vertical_m, low - vertical_m)
+        if any(bottom <= near[1] and top >= near[0] for bottom, top in spans):
+            out.add((k, extra))
+    return frozenset(out)
+
+
 def clear_raise(
     band: tuple[float, float],
     peers: Iterable[Slots],
@@ -132,15 +180,14 @@ def plan_raises(
     """Segment -> raise (metres) for the conflicts found and the precautions taken (peer ->
     segments): each clear of the slots of the peers it conflicts with (``slots``, peer ->
     announced), its band (``bands``: the segment's planned band, AMSL) raised, and clear of
-    the slots of the peers in ``keep_clear`` too: a run compared the altitudes we fly
-    without raises, so a raise must not bring a segment into the altitudes of a peer that
-    runs found clear of them.  A precaution is a conflict until its result is in.
+    the slots of the peers in ``keep_clear`` too (peers not raised: a conflict the next
+    run would find, avoided at once).  A precaution is a conflict until its result is in.
 
     ``headroom`` (segment -> metres up to the ceiling) bounds each raise: a segment no raise
     under it clears stays where it is and is returned among the unresolved -- the rest are
-    still raised (an edit refused whole at the ceiling left every conflict unresolved).  It
-    is never raised into a peer kept clear of instead: runs compared our unraised path, so
-    nobody would see that conflict.  Returns (raises, unresolved segments)."""
+    still raised (an edit refused whole at the ceiling left every conflict unresolved); it
+    is never raised into a peer kept clear of instead.  Returns (raises, unresolved
+    segments)."""
     peers_of: dict[int, set[int]] = {}
     for table in (conflicts, precautions):
         for peer, segments in table.items():

@@ -21,7 +21,7 @@ from companion.mission.flight_model import MAX_PREDICTION_S, Kinematics
 from companion.mission.flightpath import FlightPath, flight_path
 from companion.mission.ground import cut_behind, distance_m, near_answer, near_cut
 from companion.mission.items import NAV_LOITER_TIME, NAV_WAYPOINT, MissionItem
-from companion.mission.levels import Slots
+from companion.mission.levels import Slots, reach, reaching
 from companion.mission.planner import Edit
 from companion.mission.planner import Vehicle as PlanVehicle
 from companion.mission.schedule import Schedule, Vehicle, off_schedule, predict
@@ -137,6 +137,25 @@ class OwnFlight:
     def compare_version(self) -> int:
         """The version of what we compare as Alice (the original mission, on our schedule)."""
         return mission_version(self.path, self.original, self.retimed)
+
+    def reaches(self) -> dict[int, tuple[float, float]]:
+        """Segment -> the altitudes (AMSL) a run of ours compares it at besides its schedule's:
+        its planned band and that band as far as our raises take it where we fly them
+        (:func:`companion.mission.levels.reach`: ramps included)."""
+        bands = self.planned_bands()
+        out = {}
+        for k, extra in reach(self.raises).items():
+            if k in bands:
+                low, high = bands[k]
+                out[k] = (min(low, low + extra), max(high, high + extra))
+        return out
+
+    def raises_near(self, slots: Slots) -> frozenset[tuple[int, float]]:
+        """Our reaches that come near a drone announcing ``slots`` where the plan did not
+        (:func:`companion.mission.levels.reaching`): a run with it compares again when they
+        change, a raise that comes near no peer needs no run."""
+        vertical = self.settings.separation.vertical_m
+        return reaching(self.planned_bands(), reach(self.raises), slots, vertical)
 
     @property
     def original_current(self) -> int:

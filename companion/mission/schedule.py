@@ -20,6 +20,7 @@ and stay open (:attr:`Schedule.open_ended`).  These are the volumes its runs com
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from companion.mission.flight_model import MAX_PREDICTION_S, Flight, Kinematics
@@ -244,14 +245,19 @@ def route_volumes(
     resolution_mm: int,
     since_epoch_s: float,
     tolerance: Tolerance,
+    cover: Mapping[int, tuple[float, float]] | None = None,
 ) -> tuple[tuple[tuple[int, int], ...], tuple[tuple[int, int], ...]]:
     """Bands (grid cells, rounded outwards) and windows (whole seconds after the run's epoch,
     rounded outwards; open-ended ones to the end of the time range) of segments ``first`` ..
-    ``first + count - 1``; ``since_epoch_s``: how long ago the epoch was."""
+    ``first + count - 1``; ``since_epoch_s``: how long ago the epoch was; ``cover``: altitudes
+    (AMSL, low and high) a segment's band spans as well (Alice's raises as she flies them:
+    :meth:`companion.mission.own_flight.OwnFlight.reaches`)."""
     cells = 1000.0 / resolution_mm
     bands, windows = [], []
     for k in range(first, first + count):
         low, high = schedule.band(k, tolerance)
+        if cover is not None and k in cover:
+            low, high = min(low, cover[k][0]), max(high, cover[k][1])
         bands.append((math.floor(low * cells), math.ceil(high * cells)))
         start, end = schedule.window(k, tolerance)
         end = end + since_epoch_s if math.isfinite(end) else T_RANGE_S

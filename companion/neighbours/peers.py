@@ -19,6 +19,9 @@ from protocol.run import DEFAULT_LIMITS
 TRACK_KEPT = 32  # plausible positions kept per peer (its track: minutes of beacons)
 MAX_SPEED_M_S = 40.0  # no drone flies faster: beacon speeds are capped, boxes bounded by it
 TRACK_SLACK_M = 200.0  # position error a track allows on top of MAX_SPEED_M_S
+# What a run compared (companion.runs.standing.Standing.versions): the peer's mission version,
+# ours as planned, and our raises (segment, metres) that come near the peer's altitudes
+Versions = tuple[int, int, frozenset[tuple[int, float]]]
 
 
 def _reach_m(seconds: float) -> float:
@@ -34,7 +37,7 @@ class Peer:
     identity: bytes = b""  # the certified drone's fingerprint (companion.neighbours.registry)
     speed_m_s: float = 0.0
     role: Role | None = None  # once this pair has met: roles then stay
-    compared: tuple[int, int] | None = None  # (peer's, our) mission versions of the last run
+    compared: Versions | None = None  # what the last run compared (Standing.versions)
     next_try: float = 0.0
     recheck_at: float = math.inf  # we hold for it: compare again from then on (same versions)
     retry_in: float | None = None  # after a run without result: retry this soon (None: the
@@ -43,7 +46,7 @@ class Peer:
     raised: bool = False  # its announced altitude slots once reached above its first ones
     conflicts: set[int] = field(default_factory=set)  # our segments that meet its path
     plan: list[tuple[Phase, int]] = field(default_factory=list)  # runs still to do (phase, horizon)
-    plan_version: tuple[int, int] | None = None  # the versions the plan was made for
+    plan_version: Versions | None = None  # the versions the plan was made for
     covered: set[int] = field(default_factory=set)  # our segments a finished run compared
     settled: set[int] = field(default_factory=set)  # ... for good: a full run compared
     # them, or we leave them before the peer could come near (a near run left them out)

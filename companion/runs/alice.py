@@ -150,7 +150,7 @@ class AliceRuns:
         if not due:
             return None
         for peer in due:
-            version = (peer.beacon.mission_version, self.flight.compare_version)
+            version = self.standing.versions(peer)
             if peer.plan_version != version or not peer.plan:
                 if peer.plan_version != version:
                     peer.covered, peer.settled, peer.near_run = set(), set(), None
@@ -809,7 +809,8 @@ class AliceRuns:
         self, grid: GridSpec, start: int, path: list[tuple[int, int]]
     ) -> tuple[PathRoute, VolumeSpec]:
         """What we compare as Alice: the original mission's path from segment ``start`` on
-        the grid, with its bands and windows (:mod:`companion.mission.schedule`), and the run's
+        the grid, with its bands and windows (:mod:`companion.mission.schedule`) -- each band
+        reaching as far as our raises take it (:meth:`OwnFlight.reaches`) -- and the run's
         volume parameters (epoch: now)."""
         epoch = int(self.clock.wall())
         volumes = self.estimates.volumes(grid, epoch)
@@ -824,5 +825,6 @@ class AliceRuns:
             grid.resolution_mm,
             self.flight.wall_of_state() - epoch,
             self.settings.separation.tolerance,
+            self.flight.reaches(),
         )
         return PathRoute(points, bands, windows), volumes

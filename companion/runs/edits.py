@@ -147,26 +147,24 @@ class Edits:
             self.ctx.record(EventKind.RESUME_FAILED, PeerFailure(peer=node, error=str(exc)))
 
     def slots_heard(self, peer: Peer, new_peer: bool) -> None:
-        """A peer announced new altitude slots: our raises keep clear of every peer's slots
-        (a run compared the altitudes we fly without them); of two drones that raised into
-        each other's slots the higher node moves, so two never climb past each other in
-        turn.  A peer heard for the first time is news to both."""
-        node = self.settings.node
-        raised = bool(self.flight.ahead(self.flight.raises)) and (new_peer or peer.node < node)
-        # A raised higher node that moved keeps clear of us: no chasing it (its move may
-        # be one away from our raise).
-        yields = peer.raised and peer.node > node and not new_peer
-        ours = (bool(peer.conflicts) or peer.node in self.precaution) and not yields
-        if ours or raised:
+        """A peer announced new altitude slots: raises for it (a conflict, a precaution)
+        clear its new slots, and ours keep clear of those of a peer that flies its own
+        altitudes (:meth:`_keeps_clear_of`).  A peer heard for the first time is news to
+        both."""
+        raised = bool(self.flight.ahead(self.flight.raises))
+        ours = bool(peer.conflicts) or peer.node in self.precaution
+        if ours or (raised and (new_peer or self._keeps_clear_of(peer))):
             self.ctx.spawn(self.replan(f"peer {peer.node} announced altitude slots"), "replan")
 
     def _keeps_clear_of(self, peer: Peer) -> bool:
         """Whether our raises keep clear of the altitude slots of ``peer`` even where we do
-        not conflict with it (a run compared the altitudes we fly without raises): of a peer
-        that flies its own altitudes, and of a lower node's.  Of two drones that raised into
-        each other's slots the higher node moves (it hears the lower one's new slots and
-        re-plans), so two never climb past each other in turn."""
-        return not peer.raised or peer.node < self.settings.node
+        not conflict with it: of a peer that flies its own altitudes.  Not needed -- our
+        runs compare our bands as far as our raises take them
+        (:meth:`OwnFlight.reaches`), a peer's compare its own against them -- but a
+        conflict avoided needs no run.  Not of a raised peer: its slots span its column
+        from its cruise up, and keeping clear of those made drones raised for each other
+        climb past each other in turn to the ceiling (:mod:`companion.mission.levels`)."""
+        return not peer.raised
 
     async def replan(self, why: str) -> None:
         """Upload the raises the conflicts and precautions call for, if they changed."""

@@ -10,7 +10,7 @@ from companion.mission.ground import distance_m
 from companion.mission.own_flight import OwnFlight
 from companion.neighbours.beacon import alice_of
 from companion.neighbours.neighbourhood import Neighbourhood
-from companion.neighbours.peers import Peer
+from companion.neighbours.peers import Peer, Versions
 from companion.roles import Role
 
 
@@ -39,7 +39,14 @@ class Standing:
             return False
         if self.clock.now() >= peer.recheck_at:  # a hold for it asks again
             return True
-        return peer.compared != (peer.beacon.mission_version, self.flight.compare_version)
+        return peer.compared != self.versions(peer)
+
+    def versions(self, peer: Peer) -> Versions:
+        """What a comparison with ``peer`` compares: its mission, ours as planned, and those of
+        our raises that come near its announced altitudes (:meth:`OwnFlight.raises_near`) --
+        a run stands until one of them changes."""
+        near = self.flight.raises_near(peer.beacon.slots)
+        return peer.beacon.mission_version, self.flight.compare_version, near
 
     def due(self, peer: Peer, now: float) -> bool:
         """Pending, not waiting for a retry, and the peer can check our requests: its tagged

@@ -14,6 +14,8 @@ import weakref
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.app.runtime import Companion, CompanionSettings
 from companion.mission.files import read_plan
@@ -29,7 +31,14 @@ from companion.mission.ground import (
     reached_within,
 )
 from companion.mission.items import MissionItem
-from companion.mission.levels import NoClearAltitude, Slots, clear_raise, plan_raises
+from companion.mission.levels import (
+    NoClearAltitude,
+    Slots,
+    clear_raise,
+    plan_raises,
+    reach,
+    reaching,
+)
 from companion.mission.own_flight import box_radius_m
 from companion.mission.planner import OffsetSettings, plan_offsets
 from companion.neighbours.beacon import Beacon
@@ -282,6 +291,66 @@ def test_a_raise_clears_the_peers_slots_by_the_vertical_separation() -> None:
     assert clear_raise(band, [Slots()], 10.0, 10.0) == 10.0  # nothing announced: the offset
     with pytest.raises(NoClearAltitude):
         clear_raise(band, [Slots.of([(500.0, 2000.0)])], 10.0, 10.0)
+
+
+def test_a_raise_reaches_over_the_legs_that_climb_to_it_and_descend_from_it() -> None:
+    """A leg is a straight 3-D line: the one before a raised run climbs, the first after it
+    descends -- each spans the raise; where two raises meet, the larger (by size)."""
+    assert reach({2: 15.0}) == {1: 15.0, 2: 15.0, 3: 15.0}
+    assert reach({0: 10.0}) == {0: 10.0, 1: 10.0}  # (the take-off leg has none before it)
+    assert reach({1: 20.0, 2: 10.0}) == {0: 20.0, 1: 20.0, 2: 20.0, 3: 10.0}
+    assert reach({1: -10.0}) == {0: -10.0, 1: -10.0, 2: -10.0}  # (flying lower)
+    assert reach({1: 0.0}) == {}
+
+
+def test_a_raise_calls_for_a_run_only_with_the_peers_it_comes_near() -> None:
+    """Planned at 517-519 m, raised 15 m: a peer at our cruise, or 40 m up, is as near or as
+    far as before (no run); one 15 m up now lies within the 10 m separation of the band as
+    flown, and so does one at 529 m, where the planned band's separation ends."""
+    bands = {2: (517.0, 519.0)}
+    reaches = {2: 15.0}
+    assert reaching(bands, reaches, Slots.of([(517.0, 519.0)]), 10.0) == frozenset()
+    assert reaching(bands, reaches, Slots.of([(557.0, 560.0)]), 10.0) == frozenset()
+    assert reaching(bands, reaches, Slots.of([(532.0, 534.0)]), 10.0) == {(2, 15.0)}
+    assert reaching(bands, reaches, Slots.of([(529.0, 529.0)]), 10.0) == {(2, 15.0)}
+    # one peer's column from our cruise to far above: its upper part comes near
+    assert reaching(bands, reaches, Slots.of([(517.0, 560.0)]), 10.0) == {(2, 15.0)}
+    assert reaching(bands, {2: -15.0}, Slots.of([(495.0, 499.0)]), 10.0) == {(2, -15.0)}
+    assert reaching(bands, {7: 15.0}, Slots.of([(532.0, 534.0)]), 10.0) == frozenset()
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    low=st.integers(300, 700),
+    width=st.integers(0, 30),
+    extra=st.integers(-60, 60).filter(bool),
+    peer=st.lists(st.tuples(st.integers(250, 800), st.integers(0, 40)), min_size=1, max_size=3),
+    vertical=st.integers(5, 30),
+)
+def test_reaching_never_misses_an_altitude_the_raise_brings_near(
+    low: int, width: int, extra: int, peer: list[tuple[int, int]], vertical: int
+) -> None:
+    """Against every altitude a peer's slots hold (0.5 m steps): one that is within the
+    separation of the band as flown and was not of the planned band makes the raise count
+    for that peer (a run must see it); a raise that counts has such an altitude, to the
+    boundary."""
+    band = (float(low), float(low + width))
+    flown = (min(band[0], band[0] + extra), max(band[1], band[1] + extra))
+    slots = Slots.of([(float(a), float(a + h)) for a, h in peer])
+
+    def gap(alt: float, span: tuple[float, float]) -> float:
+        return max(span[0] - alt, alt - span[1], 0.0)
+
+    altitudes = [
+        bottom + 0.5 * i
+        for bottom, top in slots.intervals()
+        for i in range(int((min(top, 1000.0) - bottom) * 2) + 1)
+    ]
+    found = reaching({0: band}, {0: float(extra)}, slots, float(vertical))
+    if any(gap(a, flown) < vertical <= gap(a, band) for a in altitudes):
+        assert found == {(0, float(extra))}
+    if found:
+        assert any(gap(a, flown) <= vertical <= gap(a, band) for a in altitudes)
 
 
 def test_precautions_take_raises_like_conflicts() -> None:

@@ -9,6 +9,7 @@ from typing import Any
 
 from companion.context import Context
 from companion.events import EventKind, Payload
+from companion.mission.levels import Slots
 from companion.mission.own_flight import OwnFlight
 from companion.mission.planner import Edit
 from companion.mission.vehicle import VehicleState
@@ -112,3 +113,22 @@ def test_the_size_class_counts_a_waypoint_an_edit_inserted() -> None:
     new = [*m[:2], inserted, *[it.replace(seq=it.seq + 1) for it in m[2:]]]
     flight.edited(new, {}, Edit(new, (0, 1, 2, *range(2, len(m))), 2), mark=0, sent=0.0)
     assert len(flight.remaining_flown()[1]) - 1 == 5 and flight.own_size() == 8
+
+
+def test_our_runs_compare_our_raises_and_count_them_for_the_peers_they_come_near() -> None:
+    """Segment 2 raised 15 m: a run compares it, and the legs that climb to it and descend
+    from it, from the planned band up to the raise; the raise is news to a peer cruising
+    15 m above our plan (it comes near), not to one at our cruise or far above."""
+    flight, _ = _flight()
+    bands = flight.planned_bands()
+    assert flight.reaches() == {} and flight.raises_near(Slots.of([bands[2]])) == frozenset()
+    flight.raises = {2: 15.0}
+    reaches = flight.reaches()
+    assert sorted(reaches) == [1, 2, 3]
+    for k, (low, high) in reaches.items():
+        assert (low, high) == (bands[k][0], bands[k][1] + 15)
+    low, high = bands[2]
+    assert flight.raises_near(Slots.of([(low, high)])) == frozenset()  # our cruise
+    assert flight.raises_near(Slots.of([(low + 80, high + 80)])) == frozenset()
+    above = flight.raises_near(Slots.of([(low + 15, high + 15)]))
+    assert (2, 15.0) in above and all(extra == 15.0 for _, extra in above)

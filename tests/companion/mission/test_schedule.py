@@ -198,3 +198,8 @@ def test_route_volumes_round_outwards_after_the_epoch() -> None:
     open_ended = Schedule(0, closed.passages, True)  # (held in the air)
     _, windows = route_volumes(open_ended, 0, 1, 500, 0.0, tolerance)
     assert windows == ((-2, T_RANGE_S),)
+    # Alice's raises as flown: the band spans them as well, outwards only
+    bands, _ = route_volumes(closed, 0, 1, 1000, 5.5, tolerance, {0: (520.0, 543.5)})
+    assert bands == ((516, 544),)
+    bands, _ = route_volumes(closed, 0, 1, 1000, 5.5, tolerance, {1: (400.0, 600.0)})
+    assert bands == ((516, 529),)  # (another segment's)
