@@ -183,6 +183,13 @@ class OwnFlight:
         are made on top of it)."""
         return self._remaining(self.path, self.original_current)
 
+    @property
+    def done(self) -> bool:
+        """Landed after flying, with the mission flown to its last item: nothing left to fly
+        or to compare (until another take-off)."""
+        v = self.vehicle
+        return v.on_ground and v.has_flown and len(self.remaining_path()[1]) < 2
+
     def remaining_flown(self) -> tuple[int, list[tuple[int, int]]]:
         """The path still to fly, of the mission the vehicle holds (what Bob answers with)."""
         return self._remaining(self.flown, self.vehicle.current_item)

@@ -79,6 +79,7 @@ class Neighbourhood:
             self.flight.version,
             self.flight.slots(),
             self.flight.own_size(),
+            self.flight.done,
         )
 
     async def listen(self) -> None:

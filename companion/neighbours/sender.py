@@ -35,6 +35,7 @@ _JITTER = random.SystemRandom()
 SIGNED_EVERY_S = 300.0  # a signed beacon at least this often (for drones that missed one),
 SIGNED_EVERY = 30  # and at most every 30th beacon (a duty cycle stretches beacons to minutes)
 ASKED_AGAIN = 0.5  # asked for, a certificate or signed beacon at most every half interval
+DONE_EVERY = 2.5  # landed with the mission flown: a beacon every this many intervals
 
 
 @dataclass(frozen=True)
@@ -49,12 +50,16 @@ class Cadence:
     must not wait for a duty cycle's minutes (its budget spaces the frames itself);
     ``silence_s``: how long a peer may go unheard in the normal course (beacons are deferred
     up to three intervals while runs are on the air, and jittered; measurements age
-    ``FRESH_S``)."""
+    ``FRESH_S``); ``done_s``: the interval once the mission is flown and the drone has
+    landed (:attr:`OwnBeacon.done`) -- nobody compares with it any more, yet it stays heard
+    (1.3 x 2.5 intervals and a deferral of half of one stay under ``silence_s``), so peers
+    need not take it for a drone fallen silent nor re-learn it."""
 
     interval_s: float
     signed_every_s: float
     asked_every_s: float
     silence_s: float
+    done_s: float
 
     @classmethod
     def of(cls, profile: LinkProfile, configured_s: float) -> Cadence:
@@ -64,6 +69,7 @@ class Cadence:
             max(SIGNED_EVERY_S, SIGNED_EVERY * interval),
             max(2.0, ASKED_AGAIN * configured_s),
             4.0 * interval + FRESH_S,
+            DONE_EVERY * interval,
         )
 
 
@@ -79,6 +85,7 @@ class OwnBeacon:
     version: int
     slots: Slots
     segments: int
+    done: bool = False  # landed with its mission flown (not sent: it beacons less often)
 
 
 class BeaconSender:
@@ -157,7 +164,9 @@ class BeaconSender:
         later, for up to half an interval -- in a busy sky the channel is never free, and a
         beacon deferred by whole intervals left peers unheard for 40 s, which the fail-safe
         must take as flying straight at us (the link sends beacons ahead of run data);
-        ``content`` None: no position from the autopilot yet (beacon once there is one)."""
+        ``content`` None: no position from the autopilot yet (beacon once there is one); a
+        drone landed with its mission flown beacons every ``Cadence.done_s`` (busy_ten: half
+        the beacons of the drones that landed first came after their landing, 4.5 KB each)."""
         wait = _JITTER.uniform(0, self.cadence.interval_s)
         deferred = 0.0
         while True:
@@ -177,7 +186,8 @@ class BeaconSender:
                 continue
             deferred = 0.0
             await self._send(*self._position(own))
-            wait = self.cadence.interval_s * _JITTER.uniform(0.7, 1.3)
+            every = self.cadence.done_s if own.done else self.cadence.interval_s
+            wait = every * _JITTER.uniform(0.7, 1.3)
 
     # ------------------------------------------------------------------ inside
 

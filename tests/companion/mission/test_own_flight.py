@@ -49,15 +49,17 @@ def test_before_take_off_the_whole_path_is_left_and_after_the_last_item_nothing(
     async def main() -> None:
         flight, _ = _flight()
         first, points = flight.remaining_path()
-        assert first == 0 and points == flight.path.points
+        assert first == 0 and points == flight.path.points and not flight.done
         v = flight.vehicle
         v.moved(HOME[0], HOME[1], 520.0, 30.0, now=1.0)  # airborne
         v.current_item = 3
         start, rest = flight.remaining_path()
-        assert 0 < start and rest == flight.path.points[start:]
-        v.moved(HOME[0], HOME[1], 488.0, 0.0, now=2.0)  # landed, the last item current
-        v.current_item = len(flight.mission) - 1
+        assert 0 < start and rest == flight.path.points[start:] and not flight.done
+        v.moved(HOME[0], HOME[1], 488.0, 0.0, now=2.0)  # landed mid-mission: not done
+        assert not flight.done
+        v.current_item = len(flight.mission) - 1  # landed, the last item current
         assert len(flight.remaining_path()[1]) == 1  # the landing point: nothing to compare
+        assert flight.done  # (its beacons go less often)
 
     run_simulated(main())
 
