@@ -434,16 +434,11 @@ class AliceRuns:
         many: a run's size on the air then shows nothing of the peer's path): as many as we
         compare, or four when a run with four still comes in time (its estimate stretched by
         ``NEAR_SLACK``) -- short legs of the peer's within the horizon are then decided by
-        the near run, not left to the full run -- never more than its size class.  In a
-        crowded sky (:meth:`_lazy_s`) as many as we compare: there the bytes are what runs
-        out (busy_ten: a drone's first contacts of 2 x 4 segments sent 12.8 KB each from
-        Alice against 8.3 for 2 x 2).  Public facts and our own path only: our size, its
-        size class, the urgency, the number of drones in range."""
+        the near run, not left to the full run -- never more than its size class.  Public
+        facts and our own path only: our size, its size class, the urgency."""
         m = DEFAULT_LIMITS.public_size(len(path) - 1)
         ask = min(m, peer.size)
         more = min(max(m, NEAR_ASK), peer.size)
-        if self._lazy_s() is not None:
-            return ask
         if more > ask and not self._too_late(peer, m, more, grid, fresh=fresh):
             return more
         return ask

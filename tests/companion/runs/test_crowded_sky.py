@@ -1,17 +1,14 @@
 """Which peers a crowded sky compares with now (:meth:`AliceRuns._lazy_s`,
 :meth:`AliceRuns._urgent`): all of them while few drones are in range, only those that could
-be here within :data:`LAZY_RUNS` first runs once more pairs are in range; and how much of a
-peer's path its near runs ask for (:meth:`AliceRuns._near_ask`)."""
+be here within :data:`LAZY_RUNS` first runs once more pairs are in range."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 from typing import Any
 
 from companion.neighbours.peers import Peer
-from companion.runs.alice import LAZY_RUNS, MEASURE_WAIT, NEAR_ASK, AliceRuns
-from companion.settings import CompanionSettings
+from companion.runs.alice import LAZY_RUNS, MEASURE_WAIT, AliceRuns
 
 RUN_S = 40.9  # a first run of two segments each with a fresh OT setup, US915 SF7 at 10 % loss
 LAZY_S = LAZY_RUNS * RUN_S  # 368 s
@@ -136,17 +133,3 @@ def test_a_peer_just_met_waits_for_its_second_beacon_unless_that_is_too_late() -
     runs = _runs(10)
     runs.neighbourhood.meet.update(hood_meet)  # type: ignore[attr-defined]
     assert runs._urgent(late, now, LAZY_S)  # not measured by now: the worst case decides
-
-
-def test_a_crowd_asks_a_near_run_for_no_more_of_the_peer_than_we_compare() -> None:
-    """Four drones: a near run of our two segments asks four of the peer's when that still
-    comes in time (short legs of its decided by the near run).  A crowd asks two: there the
-    bytes run out (a 2 x 4 first contact sent 12.8 KB from Alice, a 2 x 2 one 8.3 KB)."""
-    path = [(0, 0), (0, 1000), (0, 2000)]
-    for drones, asked in ((4, NEAR_ASK), (10, 2)):
-        runs = _runs(drones)
-        runs.settings = CompanionSettings(node=1, autopilot_url="")
-        runs.neighbourhood.meet[2] = LAZY_S  # type: ignore[attr-defined]
-        peer = _peer(2)
-        peer.beacon = SimpleNamespace(size_class=3)  # type: ignore[assignment]
-        assert runs._near_ask(path, peer, None, fresh=True) == asked  # type: ignore[arg-type]

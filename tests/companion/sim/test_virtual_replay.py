@@ -107,8 +107,7 @@ def test_busy_sky_of_ten_drones() -> None:
     open: its targets are no false alarm, at most one precaution, 60 KB a drone).  The
     conflict is resolved, nothing made worse, all missions flown, and at most two
     precautions: 0-2 in each of 48 measured runs (40 with at most one) since a crowded sky
-    compares only the peers that could be here within nine first runs; before, 1-4.  Its
-    near runs asking no more than Alice compares: 0-2 in 20 of 20 (16 with at most one)."""
+    compares only the peers that could be here within nine first runs; before, 1-4."""
     report = _virtual("busy_ten")
     assert report["finished"]
     assert report["conflicts"] == report["conflicts_resolved"] == 1
