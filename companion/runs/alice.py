@@ -439,15 +439,38 @@ class AliceRuns:
         m = DEFAULT_LIMITS.public_size(len(path) - 1)
         ask = min(m, peer.size)
         more = min(max(m, NEAR_ASK), peer.size)
-        if more > ask and not self._too_late(peer, m, more, grid, fresh=fresh):
+        if more > ask and not self._too_late(peer, m, more, grid, fresh=fresh, queue=True):
             return more
         return ask
 
-    def _too_late(self, peer: Peer, m: int, n: int, grid: GridSpec, *, fresh: bool) -> bool:
-        """Whether an m x n near run, its estimate stretched by ``NEAR_SLACK``, would come
-        too late for the peer."""
+    def _too_late(
+        self, peer: Peer, m: int, n: int, grid: GridSpec, *, fresh: bool, queue: bool = False
+    ) -> bool:
+        """Whether an m x n near run, its estimate stretched by ``NEAR_SLACK`` (and, with
+        ``queue``, by the first runs the channel still carries, :meth:`_first_runs`), would
+        come too late for the peer."""
         seconds = self.estimates.seconds(m, grid, fresh=fresh, n=n) * NEAR_SLACK
+        if queue:
+            seconds *= self._first_runs()
         return too_late(seconds, self.neighbourhood.urgency(peer), self.settings.failsafe)
+
+    def _first_runs(self) -> float:
+        """How many first runs one channel in flight still carries, ours among them, at
+        least one: the pairs of drones in range, in the share of our own peers we are Alice
+        for and have not compared yet -- their first runs take turns on the air (busy_four_
+        eu868's six pairs asked four segments each and their 22 KB first runs queued up past
+        the meetings: 3.1 precautions a replay, 2.4 so; inflight_star's three pairs still
+        ask four where it counts).  A crowded sky (:meth:`_lazy_s`) compares only the
+        urgent peers and keeps its asks (asking less there cost precautions).  From the
+        neighbourhood's size and our own runs only."""
+        if self.endpoint.channels > 1 or self.vehicle.on_ground or self._lazy_s() is not None:
+            return 1.0
+        ours = [p for p in self.neighbourhood.peers.values() if self.standing.pending(p)]
+        if not ours:
+            return 1.0
+        drones = len(self.neighbourhood.peers) + 1
+        waiting = sum(1 for p in ours if p.near_run is None) / len(ours)
+        return max(1.0, waiting * drones * (drones - 1) / 2)
 
     def _decided_by_near(self, peer: Peer, start: int, path: list[tuple[int, int]]) -> int:
         """How many of a full run's first segments it need not compare: those the near run
