@@ -92,6 +92,11 @@ def _ground(
                     tail,
                     arrowprops={"arrowstyle": "-|>", "color": c, "mutation_scale": 18, "lw": 0},
                 )
+    # Of a busy sky, only the pairs that came near are labelled: those shown for a false
+    # alarm were hundreds of metres apart, and their labels piled up over one another (the
+    # report lists every figure).
+    near = NEAR_FACTOR * report.separation_m
+    many = len(report.drones) > FEW
     for pair in shown_pairs(report):
         a, b = pair.drones
         _, t, pa, pb = closest(tracks.flown[a], tracks.flown[b])
@@ -99,9 +104,10 @@ def _ground(
             (xa, ya), (xb, yb) = en(pa[0], pa[1]), en(pb[0], pb[1])
             ground.plot([xa, xb], [ya, yb], "k:", lw=1)
             ground.plot([xa, xb], [ya, yb], "kx", ms=8)
-            ground.annotate(
-                f"{a}-{b}: {pair.closest_approach_m:.1f} m at {t:.0f} s", (xa, ya), fontsize=7
-            )
+            came = min(pair.closest_approach_m, pair.closest_approach_baseline_m) <= near
+            if not many or pair.conflict or came:
+                label = f"{a}-{b}: {pair.closest_approach_m:.1f} m at {t:.0f} s"
+                ground.annotate(label, (xa, ya), fontsize=7)
     ground.plot([], [], color="red", lw=6, alpha=0.25, label="flagged segments")
     ground.plot([], [], "kx", label="closest approach")
     ground.set(xlabel="east (m)", ylabel="north (m)", title=f"{report.scenario}: ground tracks")
