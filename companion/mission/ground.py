@@ -57,6 +57,20 @@ def cut_behind(
     return [(round(cut[0] * 1e7), round(cut[1] * 1e7)), *path[1:]]
 
 
+def along_segment(a: tuple[int, int], b: tuple[int, int], share: float) -> tuple[int, int]:
+    """The point ``share`` of the way from a to b (degE7), on the tangent plane at a (as
+    :func:`cut_behind` cuts: on any other tangent plane nearby within a millimetre of the
+    straight line, where a point halfway in latitude and longitude is half a metre off a
+    5 km leg)."""
+    if share <= 0.0:
+        return a
+    if share >= 1.0:
+        return b
+    north, east = ground_offset(a[0] / 1e7, a[1] / 1e7, b[0] / 1e7, b[1] / 1e7)
+    lat, lon = moved(a[0] / 1e7, a[1] / 1e7, share * north, share * east)
+    return round(lat * 1e7), round(lon * 1e7)
+
+
 def along_m(path: Sequence[tuple[int, int]], position: tuple[int, int] | None = None) -> float:
     """How far it is along ``path`` to its end, from ``position`` (the drone, somewhere on
     the first segment) when given, else from the first vertex."""

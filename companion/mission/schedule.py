@@ -28,6 +28,10 @@ from companion.mission.flightpath import FlightPath
 from companion.mission.items import MissionItem
 from protocol.geo.volumes import MAX_SEPARATION, Separation, VolumeSpec
 
+PIECE_LAG_S = 20.0  # how far the time at a point of a leg may be from the time its share of
+# the leg's length gives: speeding up from a standstill to 15 m/s at 0.73 m/s^2 lags 10.3 s
+PIECE_MIN_S = 4 * PIECE_LAG_S  # a leg shorter than this in time is not cut into parts
+
 
 @dataclass(frozen=True, slots=True)
 class Passage:
@@ -121,6 +125,38 @@ class Schedule:
         if self.open_ended or not math.isfinite(end + self.wait_s):
             return low, math.inf
         return low, end + self.wait_s + tolerance.late(end)
+
+    def flown_s(self, segment: int) -> float:
+        """Seconds the drone flies segment ``segment``: from leaving its first vertex to
+        reaching its last (infinite when it never gets there within the prediction)."""
+        a, b = self._ends(segment)
+        return b.arrive - a.leave
+
+    def piece_window(
+        self,
+        segment: int,
+        part: tuple[float, float],
+        tolerance: Tolerance = Tolerance(),
+        lag_s: float = PIECE_LAG_S,
+    ) -> tuple[float, float]:
+        """When the part ``part`` (from and to, shares of its length) of segment ``segment``
+        is flown, widened by the tolerance: the segment's window, cut where the time its
+        share of the leg gives -- flown from leaving its first vertex to reaching its last --
+        is ``lag_s`` (the most a speed-up or a slow-down puts the drone off that time) and
+        the tolerance away.  Within the segment's window; the parts of a segment cover it."""
+        low, high = self.window(segment, tolerance)
+        a, _ = self._ends(segment)
+        span = self.flown_s(segment)
+        if not math.isfinite(span) or self.open_ended:
+            return low, high
+        start, end = part
+        if start > 0.0:
+            t = a.leave + start * span - lag_s
+            low = max(low, t - tolerance.early(t))  # (t - early(t) grows with t)
+        if end < 1.0 and math.isfinite(high):
+            t = a.leave + end * span + lag_s
+            high = min(high, t + self.wait_s + tolerance.late(t))
+        return low, high
 
     def _ends(self, segment: int) -> tuple[Passage, Passage]:
         j = segment - self.first
@@ -262,4 +298,48 @@ def route_volumes(
         start, end = schedule.window(k, tolerance)
         end = end + since_epoch_s if math.isfinite(end) else T_RANGE_S
         windows.append((math.floor(start + since_epoch_s), min(math.ceil(end), T_RANGE_S)))
+    return tuple(bands), tuple(windows)
+
+
+Piece = tuple[int, float, float]  # a segment, and the part of it (from, to: shares of its length)
+
+
+def split_long(schedule: Schedule, first: int, count: int, slots: int) -> list[Piece]:
+    """Segments ``first`` .. ``first + count - 1`` in up to ``slots`` parts: while slots are
+    left, the part flown longest is halved (none shorter than :data:`PIECE_MIN_S`, none of
+    a drone holding in the air).  A run is padded to its public size anyway: its free
+    slots cost nothing, and a part's window is its own stretch of the leg's -- a drone that
+    crosses a 5 km leg a minute after us is no conflict, the window of the whole leg made it
+    one (busy_ten's false alarms)."""
+    pieces: list[Piece] = [(k, 0.0, 1.0) for k in range(first, first + count)]
+    if schedule.open_ended:
+        return pieces
+    while len(pieces) < slots:
+        flown = [schedule.flown_s(k) * (end - start) for k, start, end in pieces]
+        j = max(range(len(pieces)), key=flown.__getitem__)
+        if not PIECE_MIN_S <= flown[j] < math.inf:
+            break
+        k, start, end = pieces[j]
+        middle = (start + end) / 2
+        pieces[j : j + 1] = [(k, start, middle), (k, middle, end)]
+    return pieces
+
+
+def piece_volumes(
+    schedule: Schedule,
+    pieces: list[Piece],
+    resolution_mm: int,
+    since_epoch_s: float,
+    tolerance: Tolerance,
+) -> tuple[tuple[tuple[int, int], ...], tuple[tuple[int, int], ...]]:
+    """:func:`route_volumes` of parts of segments (:func:`split_long`): each part its
+    segment's band and its own window (:meth:`Schedule.piece_window`)."""
+    cells = 1000.0 / resolution_mm
+    bands, windows = [], []
+    for k, start, end in pieces:
+        low, high = schedule.band(k, tolerance)
+        bands.append((math.floor(low * cells), math.ceil(high * cells)))
+        first, last = schedule.piece_window(k, (start, end), tolerance)
+        last = last + since_epoch_s if math.isfinite(last) else T_RANGE_S
+        windows.append((math.floor(first + since_epoch_s), min(math.ceil(last), T_RANGE_S)))
     return tuple(bands), tuple(windows)

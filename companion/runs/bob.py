@@ -21,10 +21,16 @@ from companion.auth.session import AuthenticationError, Identity, Init, Refusal,
 from companion.context import Context
 from companion.errors import CompanionError
 from companion.events import Answered, EventKind, PeerFailure, PeerNote
-from companion.mission.ground import COVER_ALL, distance_m
+from companion.mission.ground import COVER_ALL, along_segment, distance_m
 from companion.mission.items import point_as_segment
 from companion.mission.own_flight import OwnFlight
-from companion.mission.schedule import T_RANGE_S, route_volumes, run_volumes
+from companion.mission.schedule import (
+    T_RANGE_S,
+    piece_volumes,
+    route_volumes,
+    run_volumes,
+    split_long,
+)
 from companion.neighbours.beacon import MAX_SIZE_CLASS
 from companion.neighbours.neighbourhood import Neighbourhood
 from companion.neighbours.peers import Peer
@@ -150,7 +156,18 @@ class BobAnswers:
             )
             return PathRoute(tuple(points), (band,), ((math.floor(since), T_RANGE_S),))
         schedule = self.flight.held_schedule(start)
-        bands, windows = route_volumes(schedule, start, len(path) - 1, resolution, since, tolerance)
+        count = len(path) - 1
+        if count < size and volumes.windows:
+            # The run is padded to its size anyway: its free slots cut our longest legs in
+            # time, each part with its own window (companion.mission.schedule.split_long).
+            pieces = split_long(schedule, start, count, size)
+            k0, share0, _ = pieces[0]
+            parts = [along_segment(path[k0 - start], path[k0 - start + 1], share0)]
+            for k, _, end in pieces:
+                parts.append(along_segment(path[k - start], path[k - start + 1], end))
+            bands, windows = piece_volumes(schedule, pieces, resolution, since, tolerance)
+            return PathRoute(tuple(parts), bands, windows)
+        bands, windows = route_volumes(schedule, start, count, resolution, since, tolerance)
         return PathRoute(tuple(points), bands, windows)
 
     async def _answer(self, peer: int, session: int) -> None:

@@ -3,14 +3,19 @@ and how high, the bands and windows a run compares, and when a drone has left it
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from companion.mission.flight_model import Kinematics, fly
 from companion.mission.flightpath import flight_path
 from companion.mission.items import MissionItem
 from companion.mission.schedule import (
+    PIECE_LAG_S,
+    PIECE_MIN_S,
     T_RANGE_S,
     Passage,
     Schedule,
@@ -18,9 +23,11 @@ from companion.mission.schedule import (
     Tolerance,
     Vehicle,
     off_schedule,
+    piece_volumes,
     predict,
     route_volumes,
     run_volumes,
+    split_long,
 )
 from protocol.geo.geodesy import moved
 from protocol.geo.volumes import Separation
@@ -203,3 +210,62 @@ def test_route_volumes_round_outwards_after_the_epoch() -> None:
     assert bands == ((516, 544),)
     bands, _ = route_volumes(closed, 0, 1, 1000, 5.5, tolerance, {1: (400.0, 600.0)})
     assert bands == ((516, 529),)  # (another segment's)
+
+
+# ---------------------------------------------------------------------------- parts of legs
+
+
+def test_a_long_leg_is_cut_in_parts_with_windows_of_their_own() -> None:
+    """Free slots of a run's size halve the leg flown longest while it is flown for at least
+    PIECE_MIN_S: a 400 s leg in four parts of 100 s next to a 60 s leg that stays whole.
+    Each part's window lies within the leg's and the parts' windows cover it; the first
+    part's ends 200 s and more before the leg's does."""
+    schedule = Schedule(0, passages(0.0, 400.0, 460.0), False)
+    tolerance = Tolerance()
+    pieces = split_long(schedule, 0, 2, 5)
+    assert pieces == [(0, 0.0, 0.25), (0, 0.25, 0.5), (0, 0.5, 0.75), (0, 0.75, 1.0), (1, 0.0, 1.0)]
+    low, high = schedule.window(0, tolerance)
+    windows = [schedule.piece_window(k, (a, b), tolerance) for k, a, b in pieces[:4]]
+    assert windows[0][0] == low and windows[-1][1] == high
+    for (a0, a1), (b0, b1) in itertools.pairwise(windows):
+        assert low <= a0 <= b0 and a1 <= b1 <= high and b0 <= a1  # in order, overlapping
+    assert windows[0][1] <= high - 200.0
+    assert split_long(schedule, 0, 2, 2) == [(0, 0.0, 1.0), (1, 0.0, 1.0)]  # no slot free
+    held = Schedule(0, passages(0.0, 400.0, 460.0), True)
+    assert split_long(held, 0, 2, 8) == [(0, 0.0, 1.0), (1, 0.0, 1.0)]  # when is not known
+
+
+def test_whole_parts_have_the_volumes_of_their_segments() -> None:
+    schedule = Schedule(0, passages(0.0, 100.0, 250.0), False)
+    tolerance = Tolerance()
+    whole = [(0, 0.0, 1.0), (1, 0.0, 1.0)]
+    assert piece_volumes(schedule, whole, 2000, 30.0, tolerance) == route_volumes(
+        schedule, 0, 2, 2000, 30.0, tolerance
+    )
+
+
+@given(
+    leave=st.floats(0.0, 100.0),
+    flown=st.floats(PIECE_MIN_S, 3000.0),
+    shares=st.lists(st.floats(0.0, 1.0), min_size=2, max_size=2),
+    where=st.floats(0.0, 1.0),
+    off=st.floats(-1.0, 1.0),
+    wait=st.sampled_from([0.0, 45.0]),
+)
+def test_a_part_s_window_holds_every_moment_the_drone_may_fly_it(
+    leave: float, flown: float, shares: list[float], where: float, off: float, wait: float
+) -> None:
+    """Wherever the drone is on the part -- at a time its share of the leg gives, give or
+    take PIECE_LAG_S, and never outside the leg's own flight -- that moment widened by the
+    tolerance lies within the part's window."""
+    start, end = sorted(shares)
+    a = Passage(0.0, leave, 500.0, 500.0)
+    b = Passage(leave + flown, leave + flown, 500.0, 500.0)
+    schedule = Schedule(0, (a, b), False, wait_s=wait)
+    tolerance = Tolerance()
+    low, high = schedule.piece_window(0, (start, end), tolerance)
+    share = start + where * (end - start)
+    linear = leave + share * flown
+    t = min(max(linear + off * PIECE_LAG_S, leave), leave + flown)
+    assert low <= t - tolerance.early(t) + 1e-9
+    assert t + wait + tolerance.late(t) <= high + 1e-9
