@@ -288,17 +288,8 @@ def route_volumes(
     ``first + count - 1``; ``since_epoch_s``: how long ago the epoch was; ``cover``: altitudes
     (AMSL, low and high) a segment's band spans as well (Alice's raises as she flies them:
     :meth:`companion.mission.own_flight.OwnFlight.reaches`)."""
-    cells = 1000.0 / resolution_mm
-    bands, windows = [], []
-    for k in range(first, first + count):
-        low, high = schedule.band(k, tolerance)
-        if cover is not None and k in cover:
-            low, high = min(low, cover[k][0]), max(high, cover[k][1])
-        bands.append((math.floor(low * cells), math.ceil(high * cells)))
-        start, end = schedule.window(k, tolerance)
-        end = end + since_epoch_s if math.isfinite(end) else T_RANGE_S
-        windows.append((math.floor(start + since_epoch_s), min(math.ceil(end), T_RANGE_S)))
-    return tuple(bands), tuple(windows)
+    whole = [(k, 0.0, 1.0) for k in range(first, first + count)]
+    return piece_volumes(schedule, whole, resolution_mm, since_epoch_s, tolerance, cover)
 
 
 Piece = tuple[int, float, float]  # a segment, and the part of it (from, to: shares of its length)
@@ -331,6 +322,7 @@ def piece_volumes(
     resolution_mm: int,
     since_epoch_s: float,
     tolerance: Tolerance,
+    cover: Mapping[int, tuple[float, float]] | None = None,
 ) -> tuple[tuple[tuple[int, int], ...], tuple[tuple[int, int], ...]]:
     """:func:`route_volumes` of parts of segments (:func:`split_long`): each part its
     segment's band and its own window (:meth:`Schedule.piece_window`)."""
@@ -338,6 +330,8 @@ def piece_volumes(
     bands, windows = [], []
     for k, start, end in pieces:
         low, high = schedule.band(k, tolerance)
+        if cover is not None and k in cover:
+            low, high = min(low, cover[k][0]), max(high, cover[k][1])
         bands.append((math.floor(low * cells), math.ceil(high * cells)))
         first, last = schedule.piece_window(k, (start, end), tolerance)
         last = last + since_epoch_s if math.isfinite(last) else T_RANGE_S

@@ -23,7 +23,6 @@ from companion.mission.schedule import (
     Tolerance,
     Vehicle,
     off_schedule,
-    piece_volumes,
     predict,
     route_volumes,
     run_volumes,
@@ -235,13 +234,14 @@ def test_a_long_leg_is_cut_in_parts_with_windows_of_their_own() -> None:
     assert split_long(held, 0, 2, 8) == [(0, 0.0, 1.0), (1, 0.0, 1.0)]  # when is not known
 
 
-def test_whole_parts_have_the_volumes_of_their_segments() -> None:
-    schedule = Schedule(0, passages(0.0, 100.0, 250.0), False)
+def test_a_whole_part_has_its_segment_s_window() -> None:
+    """A segment not cut has the window it always had: from reaching its first vertex to
+    leaving its last, a loiter's time included, widened by the tolerance."""
+    schedule = Schedule(0, (Passage(0.0, 30.0, 500.0, 500.0), *passages(130.0, 250.0)), False)
     tolerance = Tolerance()
-    whole = [(0, 0.0, 1.0), (1, 0.0, 1.0)]
-    assert piece_volumes(schedule, whole, 2000, 30.0, tolerance) == route_volumes(
-        schedule, 0, 2, 2000, 30.0, tolerance
-    )
+    for k in (0, 1):
+        assert schedule.piece_window(k, (0.0, 1.0), tolerance) == schedule.window(k, tolerance)
+    assert schedule.window(0, tolerance) == (-tolerance.early_s, 130.0 + tolerance.late(130.0))
 
 
 @given(
